@@ -1,0 +1,270 @@
+"""Numba kernels of NURBS evaluation, named after the algorithms of *The NURBS Book*
+(Piegl & Tiller, 2nd ed.) and using its variable names.
+
+Conventions (all arrays flat and contiguous, float64 unless said otherwise):
+
+- ``U`` knot vector of length ``n + p + 2`` for ``n + 1`` control points of degree ``p``;
+- ``Pw`` homogeneous control net, shape ``(n_u, n_v, 4)``, rows ``(w x, w y, w z, w)``;
+- derivative orders are clamped to the degree: derivatives above ``p`` are zero.
+
+The public wrappers are in :mod:`cgfem.geometry.nurbs`; these kernels do no validation.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def find_span(n, p, u, U):
+    """A2.1 FindSpan: knot span index ``i`` with ``U[i] <= u < U[i+1]`` (``u = U[n+1]``
+    maps to the last non-empty span)."""
+    if u >= U[n + 1]:
+        return n
+    if u <= U[p]:
+        return p
+    low = p
+    high = n + 1
+    mid = (low + high) // 2
+    while u < U[mid] or u >= U[mid + 1]:
+        if u < U[mid]:
+            high = mid
+        else:
+            low = mid
+        mid = (low + high) // 2
+    return mid
+
+
+@njit(cache=True)
+def basis_funs(i, u, p, U, N):
+    """A2.2 BasisFuns: the ``p + 1`` non-vanishing basis functions at ``u`` into ``N``."""
+    left = np.empty(p + 1)
+    right = np.empty(p + 1)
+    N[0] = 1.0
+    for j in range(1, p + 1):
+        left[j] = u - U[i + 1 - j]
+        right[j] = U[i + j] - u
+        saved = 0.0
+        for r in range(j):
+            temp = N[r] / (right[r + 1] + left[j - r])
+            N[r] = saved + right[r + 1] * temp
+            saved = left[j - r] * temp
+        N[j] = saved
+
+
+@njit(cache=True)
+def ders_basis_funs(i, u, p, n, U, ders):
+    """A2.3 DersBasisFuns: ``ders[k, j]`` is the k-th derivative of ``N_{i-p+j,p}`` at ``u``,
+    for ``k <= n``; rows ``k > p`` are set to zero. ``ders`` has shape ``(n + 1, p + 1)``."""
+    ndu = np.empty((p + 1, p + 1))
+    left = np.empty(p + 1)
+    right = np.empty(p + 1)
+    a = np.empty((2, p + 1))
+    ndu[0, 0] = 1.0
+    for j in range(1, p + 1):
+        left[j] = u - U[i + 1 - j]
+        right[j] = U[i + j] - u
+        saved = 0.0
+        for r in range(j):
+            ndu[j, r] = right[r + 1] + left[j - r]
+            temp = ndu[r, j - 1] / ndu[j, r]
+            ndu[r, j] = saved + right[r + 1] * temp
+            saved = left[j - r] * temp
+        ndu[j, j] = saved
+    for k in range(n + 1):
+        for j in range(p + 1):
+            ders[k, j] = 0.0
+    for j in range(p + 1):
+        ders[0, j] = ndu[j, p]
+    nk = min(n, p)
+    for r in range(p + 1):
+        s1 = 0
+        s2 = 1
+        a[0, 0] = 1.0
+        for k in range(1, nk + 1):
+            d = 0.0
+            rk = r - k
+            pk = p - k
+            if r >= k:
+                a[s2, 0] = a[s1, 0] / ndu[pk + 1, rk]
+                d = a[s2, 0] * ndu[rk, pk]
+            j1 = 1 if rk >= -1 else -rk
+            j2 = k - 1 if r - 1 <= pk else p - r
+            for j in range(j1, j2 + 1):
+                a[s2, j] = (a[s1, j] - a[s1, j - 1]) / ndu[pk + 1, rk + j]
+                d += a[s2, j] * ndu[rk + j, pk]
+            if r <= pk:
+                a[s2, k] = -a[s1, k - 1] / ndu[pk + 1, r]
+                d += a[s2, k] * ndu[r, pk]
+            ders[k, r] = d
+            s1, s2 = s2, s1
+    r = p
+    for k in range(1, nk + 1):
+        for j in range(p + 1):
+            ders[k, j] *= r
+        r *= p - k
+
+
+@njit(cache=True)
+def _binomial(n, k):
+    c = 1.0
+    for j in range(1, k + 1):
+        c = c * (n - k + j) / j
+    return c
+
+
+@njit(cache=True)
+def surface_derivs_homogeneous(p, q, U, V, Pw, u, v, d, SKLw):
+    """A3.6 SurfaceDerivsAlg1 on the homogeneous net: ``SKLw[k, l]`` (4-vector) is
+    ``d^{k+l} Sw / du^k dv^l`` for ``k + l <= d``; other entries are zero."""
+    n = Pw.shape[0] - 1
+    m = Pw.shape[1] - 1
+    uspan = find_span(n, p, u, U)
+    vspan = find_span(m, q, v, V)
+    Nu = np.empty((d + 1, p + 1))
+    Nv = np.empty((d + 1, q + 1))
+    ders_basis_funs(uspan, u, p, d, U, Nu)
+    ders_basis_funs(vspan, v, q, d, V, Nv)
+    temp = np.empty((q + 1, 4))
+    for k in range(d + 1):
+        for l in range(d + 1):
+            for c in range(4):
+                SKLw[k, l, c] = 0.0
+    for k in range(d + 1):
+        for s in range(q + 1):
+            for c in range(4):
+                acc = 0.0
+                for r in range(p + 1):
+                    acc += Nu[k, r] * Pw[uspan - p + r, vspan - q + s, c]
+                temp[s, c] = acc
+        for l in range(d - k + 1):
+            for c in range(4):
+                acc = 0.0
+                for s in range(q + 1):
+                    acc += Nv[l, s] * temp[s, c]
+                SKLw[k, l, c] = acc
+
+
+@njit(cache=True)
+def rat_surface_derivs(SKLw, d, SKL):
+    """A4.4 RatSurfaceDerivs: Cartesian derivatives ``SKL[k, l]`` (3-vectors, ``k + l <= d``)
+    from the homogeneous ones ``SKLw``."""
+    v = np.empty(3)
+    v2 = np.empty(3)
+    for k in range(d + 1):
+        for l in range(d - k + 1):
+            for c in range(3):
+                v[c] = SKLw[k, l, c]
+            for j in range(1, l + 1):
+                b = _binomial(l, j) * SKLw[0, j, 3]
+                for c in range(3):
+                    v[c] -= b * SKL[k, l - j, c]
+            for i in range(1, k + 1):
+                b = _binomial(k, i) * SKLw[i, 0, 3]
+                for c in range(3):
+                    v[c] -= b * SKL[k - i, l, c]
+                for c in range(3):
+                    v2[c] = 0.0
+                for j in range(1, l + 1):
+                    b2 = _binomial(l, j) * SKLw[i, j, 3]
+                    for c in range(3):
+                        v2[c] += b2 * SKL[k - i, l - j, c]
+                b = _binomial(k, i)
+                for c in range(3):
+                    v[c] -= b * v2[c]
+            for c in range(3):
+                SKL[k, l, c] = v[c] / SKLw[0, 0, 3]
+
+
+@njit(cache=True)
+def surface_derivs(p, q, U, V, Pw, u, v, d, SKL):
+    """Rational surface and its derivatives up to total order ``d`` at one ``(u, v)`` into
+    ``SKL`` of shape ``(d + 1, d + 1, 3)`` (entries with ``k + l > d`` are zero)."""
+    SKLw = np.empty((d + 1, d + 1, 4))
+    surface_derivs_homogeneous(p, q, U, V, Pw, u, v, d, SKLw)
+    for k in range(d + 1):
+        for l in range(d + 1):
+            for c in range(3):
+                SKL[k, l, c] = 0.0
+    rat_surface_derivs(SKLw, d, SKL)
+
+
+@njit(cache=True)
+def surface_point(p, q, U, V, Pw, u, v, out):
+    """A4.3 SurfacePoint of the rational surface at one ``(u, v)`` into ``out`` (3,)."""
+    n = Pw.shape[0] - 1
+    m = Pw.shape[1] - 1
+    uspan = find_span(n, p, u, U)
+    vspan = find_span(m, q, v, V)
+    Nu = np.empty(p + 1)
+    Nv = np.empty(q + 1)
+    basis_funs(uspan, u, p, U, Nu)
+    basis_funs(vspan, v, q, V, Nv)
+    Sw = np.zeros(4)
+    for s in range(q + 1):
+        for r in range(p + 1):
+            b = Nu[r] * Nv[s]
+            for c in range(4):
+                Sw[c] += b * Pw[uspan - p + r, vspan - q + s, c]
+    for c in range(3):
+        out[c] = Sw[c] / Sw[3]
+
+
+@njit(cache=True)
+def surface_points_batch(p, q, U, V, Pw, uv, out):
+    """Points at each row of ``uv`` (n, 2) into ``out`` (n, 3)."""
+    for i in range(uv.shape[0]):
+        surface_point(p, q, U, V, Pw, uv[i, 0], uv[i, 1], out[i])
+
+
+@njit(cache=True)
+def surface_derivs_batch(p, q, U, V, Pw, uv, d, out):
+    """Derivatives up to order ``d`` at each row of ``uv`` (n, 2) into ``out``
+    (n, d + 1, d + 1, 3)."""
+    for i in range(uv.shape[0]):
+        surface_derivs(p, q, U, V, Pw, uv[i, 0], uv[i, 1], d, out[i])
+
+
+@njit(cache=True)
+def unit_normal(p, q, U, V, Pw, u, v, lo_u, hi_u, lo_v, hi_v, out):
+    """Unit normal ``S_u x S_v / |S_u x S_v|`` at ``(u, v)`` into ``out`` (3,).
+
+    At a degenerate point (a collapsed edge such as a sphere pole, where the cross product
+    vanishes) the normal is the limit taken from inside the domain ``[lo_u, hi_u] x [lo_v,
+    hi_v]``: evaluated a relative 1e-7 of the way toward the domain centre.
+    """
+    SKL = np.empty((2, 2, 3))
+    uu = u
+    vv = v
+    for attempt in range(3):
+        surface_derivs(p, q, U, V, Pw, uu, vv, 1, SKL)
+        su = SKL[1, 0]
+        sv = SKL[0, 1]
+        nx = su[1] * sv[2] - su[2] * sv[1]
+        ny = su[2] * sv[0] - su[0] * sv[2]
+        nz = su[0] * sv[1] - su[1] * sv[0]
+        norm = np.sqrt(nx * nx + ny * ny + nz * nz)
+        scale = np.sqrt(su[0] ** 2 + su[1] ** 2 + su[2] ** 2) * np.sqrt(sv[0] ** 2 + sv[1] ** 2 + sv[2] ** 2)
+        if norm > 1e-10 * scale and norm > 0.0:
+            out[0] = nx / norm
+            out[1] = ny / norm
+            out[2] = nz / norm
+            return
+        step = 1e-7 * 10.0 ** (2 * attempt)
+        uu = uu + step * (0.5 * (lo_u + hi_u) - uu)
+        vv = vv + step * (0.5 * (lo_v + hi_v) - vv)
+    out[0] = 0.0
+    out[1] = 0.0
+    out[2] = 0.0
+
+
+@njit(cache=True)
+def unit_normals_batch(p, q, U, V, Pw, uv, out):
+    """Unit normals at each row of ``uv`` (n, 2) into ``out`` (n, 3)."""
+    lo_u = U[p]
+    hi_u = U[U.shape[0] - p - 1]
+    lo_v = V[q]
+    hi_v = V[V.shape[0] - q - 1]
+    for i in range(uv.shape[0]):
+        unit_normal(p, q, U, V, Pw, uv[i, 0], uv[i, 1], lo_u, hi_u, lo_v, hi_v, out[i])
