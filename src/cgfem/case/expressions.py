@@ -102,8 +102,9 @@ class _Parser:
         self.i = 0
 
     # -- errors and tokens -------------------------------------------------------------
-    def error(self, what: str, pos: int) -> InputError:
-        return InputError(self.field, f"{what} at position {pos} in expression {_shown(self.source)}")
+    def error(self, what: str, pos: int, hint: str = "") -> InputError:
+        message = f"{what} at position {pos} in expression {_shown(self.source)}"
+        return InputError(self.field, f"{message} ({hint})" if hint else message)
 
     def _tokenize(self) -> list[_Token]:
         s, n, i = self.source, len(self.source), 0
@@ -126,11 +127,8 @@ class _Parser:
             elif _NAME.match(s, i):
                 name = _NAME.match(s, i).group()
                 if name not in VARIABLES and name not in FUNCTIONS:
-                    raise self.error(
-                        f"unknown name {name!r} (allowed: x, y, z and the functions "
-                        f"{', '.join(FUNCTIONS)})",
-                        i,
-                    )
+                    allowed = ", ".join((*VARIABLES, *FUNCTIONS))
+                    raise self.error(f"unknown name {name!r}", i, f"allowed: {allowed}")
                 tokens.append(_Token("name", name, i))
                 i += len(name)
             elif s.startswith("**", i):
@@ -234,7 +232,9 @@ class _Parser:
         if not self.at("**"):
             return base
         op = self.take()
+        self.enter(op.pos)
         exponent = self.unary()
+        self.depth -= 1
         if exponent.constant is None:
             raise self.error("the exponent of '**' must be a constant (numbers only)", op.pos)
         if abs(exponent.constant) > MAX_EXPONENT:

@@ -1,0 +1,5 @@
+import sys
+
+from cgfem.cli import main
+
+sys.exit(main())
