@@ -96,6 +96,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except InputError as err:
         print(f"cgfem: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except BrokenPipeError:  # output piped into a pager or `head` that stopped reading
+        sys.stdout = None
+        return EXIT_OK
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1,0 +1,147 @@
+"""Exact partition of a solid's NURBS boundary by the planes of a Cartesian grid.
+
+:func:`partition_surface` returns the surface quadrature of every grid element the boundary
+passes through (NURBS-enhanced: points on the exact surface, with their ``(xi, eta)``) and
+the quadrature of the trimming curves on the grid planes ``x = const`` (used for exact
+volume moments of cut elements, :mod:`cgfem.embedding.moments`). The pieces of surface of
+neighbouring elements meet exactly along the true intersection curves; the algorithm is in
+:mod:`cgfem.embedding._partition_kernels`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cgfem.embedding import _partition_kernels as _k
+from cgfem.embedding.grid import CartesianGrid
+from cgfem.geometry.refine import bezier_patches
+from cgfem.geometry.solid import Solid
+
+#: Target relative accuracy of every Gauss interval of the partition (error model in
+#: :func:`cgfem.embedding._partition_kernels.gauss_order`), and the fewest and most points
+#: per direction and interval. Two points integrate the bilinear products of H8 shape
+#: functions exactly on flat faces.
+DEFAULT_TOL = 1e-13
+MIN_POINTS = 2
+MAX_POINTS = 12
+#: Subdivision depth at which a cell is integrated without exact splitting (tangencies only).
+MAX_DEPTH = 40
+
+
+@dataclass(frozen=True)
+class SurfaceQuadrature:
+    """Quadrature of (a part of) the boundary, one row per point.
+
+    patch : (n,) index of the patch in ``solid.patches``
+    uv : (n, 2) NURBS parameters ``(xi, eta)``
+    x : (n, 3) points on the exact surface
+    w : (n,) area weights
+    normal : (n, 3) outward unit normals
+    element : (n,) linear id of the grid element holding the point
+    """
+
+    patch: np.ndarray
+    uv: np.ndarray
+    x: np.ndarray
+    w: np.ndarray
+    normal: np.ndarray
+    element: np.ndarray
+
+    def select(self, mask: np.ndarray) -> "SurfaceQuadrature":
+        """The rows where ``mask`` holds."""
+        return SurfaceQuadrature(*(getattr(self, f)[mask] for f in
+                                   ("patch", "uv", "x", "w", "normal", "element")))
+
+
+@dataclass(frozen=True)
+class TrimQuadrature:
+    """Quadrature of the curves where the boundary crosses grid planes ``x = const``.
+
+    x : (m, 3) points; w : (m,) length weights; m_y : (m,) y component of the unit normal
+    to the curve, in the plane, pointing out of the solid's section; element : (m,) the
+    element whose ``+x`` face holds the point.
+    """
+
+    x: np.ndarray
+    w: np.ndarray
+    m_y: np.ndarray
+    element: np.ndarray
+
+
+@dataclass(frozen=True)
+class SurfacePartition:
+    surface: SurfaceQuadrature
+    trims: TrimQuadrature
+    approximate_cells: int
+
+
+def gauss_tables(n_max: int) -> tuple[np.ndarray, np.ndarray]:
+    """``GX[n, :n], GW[n, :n]``: the n-point Gauss-Legendre rules on [0, 1], n <= n_max."""
+    GX = np.zeros((n_max + 1, n_max))
+    GW = np.zeros((n_max + 1, n_max))
+    for n in range(1, n_max + 1):
+        g, w = np.polynomial.legendre.leggauss(n)
+        GX[n, :n] = 0.5 * (g + 1.0)
+        GW[n, :n] = 0.5 * w
+    return GX, GW
+
+
+def _run_piece(net, grid: CartesianGrid, GX, GW, rule, capacity: int):
+    while True:
+        out_st = np.empty((capacity, 2))
+        out_x = np.empty((capacity, 3))
+        out_w = np.empty(capacity)
+        out_n = np.empty((capacity, 3))
+        out_e = np.empty((capacity, 3), np.int64)
+        trim_x = np.empty((capacity, 3))
+        trim_w = np.empty(capacity)
+        trim_my = np.empty(capacity)
+        trim_plane = np.empty(capacity, np.int64)
+        trim_st = np.empty((capacity, 2))
+        counts = np.zeros(4, np.int64)
+        _k.partition_piece(net, np.asarray(grid.origin, float), float(grid.h),
+                           np.asarray(grid.shape, np.int64), GX, GW, rule, MAX_DEPTH,
+                           out_st, out_x, out_w, out_n, out_e,
+                           trim_x, trim_w, trim_my, trim_plane, trim_st, counts)
+        if counts[3] == 0:
+            ns, nt = int(counts[0]), int(counts[1])
+            return (out_st[:ns], out_x[:ns], out_w[:ns], out_n[:ns], out_e[:ns],
+                    trim_x[:nt], trim_w[:nt], trim_my[:nt], trim_plane[:nt], int(counts[2]))
+        capacity *= 4
+
+
+def partition_surface(solid: Solid, grid: CartesianGrid, tol: float = DEFAULT_TOL,
+                      min_points: int = MIN_POINTS, max_points: int = MAX_POINTS) -> SurfacePartition:
+    """Surface and x-plane trimming quadratures of ``solid`` cut by ``grid``; ``tol`` is the
+    target relative accuracy of each Gauss interval."""
+    GX, GW = gauss_tables(max_points)
+    rule = np.array([np.log(tol), min_points, max_points], float)
+    rows = {k: [] for k in ("patch", "uv", "x", "w", "normal", "element")}
+    trims = {k: [] for k in ("x", "w", "m_y", "element")}
+    approx = 0
+    for ip, patch in enumerate(solid.patches):
+        for piece, (u0, u1), (v0, v1) in bezier_patches(patch.surface):
+            net = np.ascontiguousarray(piece.control)
+            capacity = 4096
+            (st, x, w, n, e, tx, tw, tmy, tplane, n_approx) = _run_piece(net, grid, GX, GW, rule, capacity)
+            approx += n_approx
+            uv = np.column_stack([u0 + st[:, 0] * (u1 - u0), v0 + st[:, 1] * (v1 - v0)])
+            rows["patch"].append(np.full(w.shape, ip, np.int64))
+            rows["uv"].append(uv)
+            rows["x"].append(x)
+            rows["w"].append(w)  # |S_s x S_t| ds dt is already dA
+            rows["normal"].append(n)
+            rows["element"].append(grid.element_id(e))
+            jk = np.floor((tx[:, 1:] - np.asarray(grid.origin[1:])) / grid.h).astype(np.int64)
+            jk = np.clip(jk, 0, np.asarray(grid.shape[1:]) - 1)
+            ijk = np.column_stack([tplane - 1, jk])
+            trims["x"].append(tx)
+            trims["w"].append(tw)
+            trims["m_y"].append(tmy)
+            trims["element"].append(np.where(ijk[:, 0] >= 0, grid.element_id(np.maximum(ijk, 0)), -1))
+    surface = SurfaceQuadrature(*(np.concatenate(rows[k]) for k in
+                                  ("patch", "uv", "x", "w", "normal", "element")))
+    trim = TrimQuadrature(*(np.concatenate(trims[k]) for k in ("x", "w", "m_y", "element")))
+    return SurfacePartition(surface, trim, approx)
