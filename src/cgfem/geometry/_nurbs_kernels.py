@@ -245,7 +245,9 @@ def unit_normal(p, q, U, V, Pw, u, v, lo_u, hi_u, lo_v, hi_v, out):
         ny = su[2] * sv[0] - su[0] * sv[2]
         nz = su[0] * sv[1] - su[1] * sv[0]
         norm = np.sqrt(nx * nx + ny * ny + nz * nz)
-        scale = np.sqrt(su[0] ** 2 + su[1] ** 2 + su[2] ** 2) * np.sqrt(sv[0] ** 2 + sv[1] ** 2 + sv[2] ** 2)
+        # compare with the larger tangent squared: at a collapsed edge one tangent is
+        # round-off, and so is the cross product
+        scale = max(su[0] ** 2 + su[1] ** 2 + su[2] ** 2, sv[0] ** 2 + sv[1] ** 2 + sv[2] ** 2)
         if norm > 1e-10 * scale and norm > 0.0:
             out[0] = nx / norm
             out[1] = ny / norm
