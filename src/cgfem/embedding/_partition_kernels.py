@@ -28,232 +28,20 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from cgfem.embedding._bernstein import _inner_root, _split_net, point_derivs, univariate_roots
+
 MAX_FUNCS = 16
+#: fewest Gauss points along the outer direction of an interval crossed by a trimming curve
+N_CURVE = 5
+#: the adaptive check of trimming curves accepts errors of this many times the tolerance
+CURVE_TOL_FACTOR = 10.0
+#: smallest derivative coefficient, relative to the largest, of a monotone function
+MONOTONE_MARGIN = 0.1
+#: steepest zero curve (cell coordinates) integrated along a direction; steeper: the other
+MAX_SLOPE = np.inf
+#: outer intervals shorter than this (piece coordinates) are not halved further
+MIN_INTERVAL = 1e-9
 MAX_ROOTS = 64
-
-
-@njit(cache=True)
-def _binom(n, k):
-    c = 1.0
-    for j in range(1, k + 1):
-        c = c * (n - k + j) / j
-    return c
-
-
-@njit(cache=True)
-def bernstein(n, x, B, dB):
-    """Bernstein basis of degree ``n`` at ``x`` into ``B`` and its derivative into ``dB``."""
-    for i in range(n + 1):
-        B[i] = _binom(n, i) * x**i * (1.0 - x) ** (n - i)
-    if n == 0:
-        dB[0] = 0.0
-        return
-    for i in range(n + 1):
-        a = _binom(n - 1, i - 1) * x ** (i - 1) * (1.0 - x) ** (n - i) if i >= 1 else 0.0
-        b = _binom(n - 1, i) * x**i * (1.0 - x) ** (n - 1 - i) if i <= n - 1 else 0.0
-        dB[i] = n * (a - b)
-
-
-@njit(cache=True)
-def point_derivs(net, s, t, x, xs, xt):
-    """Rational point ``x`` and first derivatives ``xs, xt`` of Bernstein net ``net`` at
-    local ``(s, t)``."""
-    p = net.shape[0] - 1
-    q = net.shape[1] - 1
-    Bu = np.empty(p + 1)
-    dBu = np.empty(p + 1)
-    Bv = np.empty(q + 1)
-    dBv = np.empty(q + 1)
-    bernstein(p, s, Bu, dBu)
-    bernstein(q, t, Bv, dBv)
-    S = np.zeros(4)
-    Ss = np.zeros(4)
-    St = np.zeros(4)
-    for i in range(p + 1):
-        for j in range(q + 1):
-            for c in range(4):
-                v = net[i, j, c]
-                S[c] += Bu[i] * Bv[j] * v
-                Ss[c] += dBu[i] * Bv[j] * v
-                St[c] += Bu[i] * dBv[j] * v
-    w = S[3]
-    for c in range(3):
-        x[c] = S[c] / w
-        xs[c] = (Ss[c] - Ss[3] * x[c]) / w
-        xt[c] = (St[c] - St[3] * x[c]) / w
-
-
-@njit(cache=True)
-def _split_net(net, axis, a):
-    """de Casteljau subdivision of ``net`` at local ``a`` along ``axis`` (0 or 1)."""
-    left = net.copy()
-    right = net.copy()
-    n = net.shape[axis] - 1
-    other = net.shape[1 - axis]
-    tmp = np.empty((n + 1, 4))
-    for o in range(other):
-        for i in range(n + 1):
-            for c in range(4):
-                tmp[i, c] = net[i, o, c] if axis == 0 else net[o, i, c]
-        for r in range(n + 1):
-            for c in range(4):
-                if axis == 0:
-                    left[r, o, c] = tmp[0, c]
-                    right[n - r, o, c] = tmp[n - r, c]
-                else:
-                    left[o, r, c] = tmp[0, c]
-                    right[o, n - r, c] = tmp[n - r, c]
-            for i in range(n - r):
-                for c in range(4):
-                    tmp[i, c] = (1.0 - a) * tmp[i, c] + a * tmp[i + 1, c]
-    return left, right
-
-
-@njit(cache=True)
-def _casteljau(coef, x):
-    """Value and derivative of the univariate Bernstein polynomial ``coef`` at ``x``."""
-    n = coef.shape[0] - 1
-    if n == 0:
-        return coef[0], 0.0
-    b = coef.copy()
-    for r in range(1, n):
-        for i in range(n - r + 1):
-            b[i] = (1.0 - x) * b[i] + x * b[i + 1]
-    value = (1.0 - x) * b[0] + x * b[1]
-    return value, n * (b[1] - b[0])
-
-
-@njit(cache=True)
-def _bracketed_root(coef, lo, hi):
-    """The root of ``coef`` in ``[lo, hi]`` (values of opposite sign at the ends), by
-    Newton steps safeguarded with bisection."""
-    flo, _ = _casteljau(coef, lo)
-    x = 0.5 * (lo + hi)
-    for _ in range(100):
-        f, df = _casteljau(coef, x)
-        if f == 0.0:
-            return x
-        if (f < 0.0) == (flo < 0.0):
-            lo = x
-            flo = f
-        else:
-            hi = x
-        xn = x - f / df if df != 0.0 else 0.5 * (lo + hi)
-        if not (lo < xn < hi):
-            xn = 0.5 * (lo + hi)
-        if abs(xn - x) <= 1e-16 + 2e-16 * abs(x) or hi - lo <= 4e-16:
-            return xn
-        x = xn
-    return x
-
-
-@njit(cache=True)
-def _sign_changes(coef):
-    changes = 0
-    prev = coef[0] >= 0.0
-    for i in range(1, coef.shape[0]):
-        cur = coef[i] >= 0.0
-        if cur != prev:
-            changes += 1
-        prev = cur
-    return changes
-
-
-@njit(cache=True)
-def univariate_roots(coef, roots):
-    """Roots in ``[0, 1)`` of the Bernstein polynomial ``coef`` (ascending) into ``roots``;
-    returns their number. Isolation by subdivision (a single sign change of the Bernstein
-    coefficients means exactly one root), refinement by safeguarded Newton."""
-    n = coef.shape[0] - 1
-    count = 0
-    stack_c = np.empty((64, n + 1))
-    stack_a = np.empty(64)
-    stack_b = np.empty(64)
-    stack_d = np.empty(64, np.int64)
-    top = 0
-    stack_c[0] = coef
-    stack_a[0] = 0.0
-    stack_b[0] = 1.0
-    stack_d[0] = 0
-    top = 1
-    while top > 0:
-        top -= 1
-        c = stack_c[top].copy()
-        a = stack_a[top]
-        b = stack_b[top]
-        d = stack_d[top]
-        ch = _sign_changes(c)
-        if ch == 0:
-            continue
-        if ch == 1 or d >= 48:
-            if ch == 1:
-                r = _bracketed_root(c, 0.0, 1.0)
-            else:
-                r = 0.5
-            x = a + r * (b - a)
-            if x < 1.0 and count < roots.shape[0]:
-                roots[count] = x
-                count += 1
-            continue
-        # split at the middle: right half pushed first so the left is processed first
-        left = c.copy()
-        right = c.copy()
-        tmp = c.copy()
-        for r in range(n + 1):
-            left[r] = tmp[0]
-            right[n - r] = tmp[n - r]
-            for i in range(n - r):
-                tmp[i] = 0.5 * (tmp[i] + tmp[i + 1])
-        m = 0.5 * (a + b)
-        if top + 2 > 64:
-            continue
-        stack_c[top] = right
-        stack_a[top] = m
-        stack_b[top] = b
-        stack_d[top] = d + 1
-        top += 1
-        stack_c[top] = left
-        stack_a[top] = a
-        stack_b[top] = m
-        stack_d[top] = d + 1
-        top += 1
-    # ascending order
-    for i in range(1, count):
-        v = roots[i]
-        j = i - 1
-        while j >= 0 and roots[j] > v:
-            roots[j + 1] = roots[j]
-            j -= 1
-        roots[j + 1] = v
-    return count
-
-
-@njit(cache=True)
-def _line_coef(pnet, axis_k, c, sigma, coef):
-    """Bernstein coefficients along the inner direction of ``x_k - c`` (times w) on the
-    line ``outer = sigma`` of the (possibly transposed) piece net ``pnet``."""
-    p = pnet.shape[0] - 1
-    q = pnet.shape[1] - 1
-    B = np.empty(p + 1)
-    dB = np.empty(p + 1)
-    bernstein(p, sigma, B, dB)
-    for j in range(q + 1):
-        acc = 0.0
-        for i in range(p + 1):
-            acc += B[i] * (pnet[i, j, axis_k] - c * pnet[i, j, 3])
-        coef[j] = acc
-
-
-@njit(cache=True)
-def _inner_root(pnet, axis_k, c, sigma, lo, hi, coef):
-    """Root in ``[lo, hi]`` of plane ``x_k = c`` on the inner line at ``sigma``, or -1 if
-    the values at ``lo`` and ``hi`` have the same sign."""
-    _line_coef(pnet, axis_k, c, sigma, coef)
-    flo, _ = _casteljau(coef, lo)
-    fhi, _ = _casteljau(coef, hi)
-    if (flo >= 0.0) == (fhi >= 0.0):
-        return -1.0
-    return _bracketed_root(coef, lo, hi)
 
 
 @njit(cache=True)
@@ -347,36 +135,62 @@ def _emit_cell(pnet, sa, sb, ta, tb, origin, h, shape, GX, GW, rule,
 
 @njit(cache=True)
 def _classify(cnet, fk, fc, nf, inner, kinds):
-    """For each function: 1 if strictly monotone along ``inner``, 2 if constant along it;
-    returns False if some function is neither."""
+    """For each function: 1 if its zero curve is a graph over the outer direction with a
+    bounded slope, 2 if the function is constant along ``inner``; returns False if some
+    function is neither (the cell is then split, or the other direction tried).
+
+    Graph: every Bernstein coefficient of the inner derivative has one sign and exceeds
+    ``MONOTONE_MARGIN`` times the largest (a derivative that vanishes on a cell edge, such
+    as a fold on a knot line, is not taken for monotone on round-off), and the bound
+    ``max |F_outer| / min |F_inner| <= MAX_SLOPE`` holds on the cell: a steep curve is
+    integrated along the other direction, where it is flat.
+    """
     p = cnet.shape[0] - 1
     q = cnet.shape[1] - 1
     for f in range(nf):
         k = fk[f]
         c = fc[f]
-        pos = True
-        neg = True
         big = 0.0
-        var = 0.0
+        dmax = 0.0
+        omax = 0.0
         for i in range(p + 1):
             for j in range(q + 1):
                 v = cnet[i, j, k] - c * cnet[i, j, 3]
                 big = max(big, abs(v))
+                if j < q:
+                    dq = q * abs((cnet[i, j + 1, k] - c * cnet[i, j + 1, 3]) - v)
+                    if inner == 1:
+                        dmax = max(dmax, dq)
+                    else:
+                        omax = max(omax, dq)
+                if i < p:
+                    dp = p * abs((cnet[i + 1, j, k] - c * cnet[i + 1, j, 3]) - v)
+                    if inner == 0:
+                        dmax = max(dmax, dp)
+                    else:
+                        omax = max(omax, dp)
+        if dmax <= 1e-13 * big:
+            kinds[f] = 2
+            continue
+        pos = True
+        neg = True
+        dmin = np.inf
+        margin = MONOTONE_MARGIN * dmax
+        for i in range(p + 1):
+            for j in range(q + 1):
                 if inner == 1 and j < q:
-                    d = (cnet[i, j + 1, k] - c * cnet[i, j + 1, 3]) - v
+                    d = q * ((cnet[i, j + 1, k] - c * cnet[i, j + 1, 3]) - (cnet[i, j, k] - c * cnet[i, j, 3]))
                 elif inner == 0 and i < p:
-                    d = (cnet[i + 1, j, k] - c * cnet[i + 1, j, 3]) - v
+                    d = p * ((cnet[i + 1, j, k] - c * cnet[i + 1, j, 3]) - (cnet[i, j, k] - c * cnet[i, j, 3]))
                 else:
                     continue
-                var = max(var, abs(d))
-                if not d > 0.0:
+                dmin = min(dmin, abs(d))
+                if not d > margin:
                     pos = False
-                if not d < 0.0:
+                if not d < -margin:
                     neg = False
-        if pos or neg:
+        if (pos or neg) and omax <= MAX_SLOPE * dmin:
             kinds[f] = 1
-        elif var <= 1e-13 * big:
-            kinds[f] = 2
         else:
             return False
     return True
@@ -460,6 +274,106 @@ def _map_st(sigma, tau, swapped):
 
 
 @njit(cache=True)
+def _root_sum(pn, fk, fc, kinds, nf, a, b, n, GX, GW, ia, ib, icoef, rts, rfs):
+    """n-point Gauss integral over ``[a, b]`` of the sum of the inner roots."""
+    total = 0.0
+    for g in range(n):
+        sigma = a + GX[n, g] * (b - a)
+        nr = _roots_at(pn, fk, fc, kinds, nf, sigma, ia, ib, icoef, rts, rfs)
+        acc = 0.0
+        for r in range(nr):
+            acc += rts[r]
+        total += GW[n, g] * (b - a) * acc
+    return total
+
+
+@njit(cache=True)
+def _curve_point(pnet, pn, c, sigma, ia, ib, swapped, icoef, x, xs, xt, tangent):
+    """Point, surface derivatives and tangent ``dX/d sigma`` of the curve ``x = c`` at the
+    outer coordinate ``sigma``; returns the local ``(s, t)``, or (-1, -1) if it has no root."""
+    r = _inner_root(pn, 0, c, sigma, ia, ib, icoef)
+    if r < 0.0:
+        return -1.0, -1.0
+    s, t = _map_st(sigma, r, swapped)
+    point_derivs(pnet, s, t, x, xs, xt)
+    if swapped:
+        xo = xt
+        xi = xs
+    else:
+        xo = xs
+        xi = xt
+    slope = -xo[0] / xi[0]
+    for k in range(3):
+        tangent[k] = xo[k] + xi[k] * slope
+    return s, t
+
+
+@njit(cache=True)
+def _curve_length(pnet, pn, c, a, b, n, ia, ib, swapped, GX, GW, icoef):
+    """n-point Gauss estimate of the length of the curve ``x = c`` over ``[a, b]``."""
+    x = np.empty(3)
+    xs = np.empty(3)
+    xt = np.empty(3)
+    tangent = np.empty(3)
+    total = 0.0
+    for g in range(n):
+        s, t = _curve_point(pnet, pn, c, a + GX[n, g] * (b - a), ia, ib, swapped, icoef, x, xs, xt, tangent)
+        if s >= 0.0:
+            total += GW[n, g] * (b - a) * np.sqrt(tangent[0] ** 2 + tangent[1] ** 2 + tangent[2] ** 2)
+    return total
+
+
+@njit(cache=True)
+def _trim_curve(pnet, pn, c, plane, x0, x1, ia, ib, swapped, GX, GW, rule, icoef,
+                trim_x, trim_w, trim_my, trim_plane, trim_st, counts):
+    """Quadrature of the trimming curve ``x = c`` over the outer interval ``[x0, x1]``:
+    Gauss rules on intervals halved until the length estimates of an interval and its two
+    halves agree to ``CURVE_TOL_FACTOR`` times the tolerance (relative)."""
+    log_tol = rule[0]
+    tol = CURVE_TOL_FACTOR * np.exp(log_tol)
+    x = np.empty(3)
+    xs = np.empty(3)
+    xt = np.empty(3)
+    tangent = np.empty(3)
+    normal = np.empty(3)
+    stack = np.empty((64, 2))
+    depth = np.empty(64, np.int64)
+    stack[0, 0] = x0
+    stack[0, 1] = x1
+    depth[0] = 0
+    top = 1
+    while top > 0:
+        top -= 1
+        a = stack[top, 0]
+        b = stack[top, 1]
+        d = depth[top]
+        n = max(gauss_order(b - a, log_tol, int(rule[1]), int(rule[2]) - 2), N_CURVE)
+        if d < 48 and top + 2 <= 64 and b - a > MIN_INTERVAL:
+            m = 0.5 * (a + b)
+            coarse = _curve_length(pnet, pn, c, a, b, n, ia, ib, swapped, GX, GW, icoef)
+            fine = _curve_length(pnet, pn, c, a, b, n + 2, ia, ib, swapped, GX, GW, icoef)
+            if abs(coarse - fine) > tol * abs(fine):
+                stack[top, 0] = m
+                stack[top, 1] = b
+                depth[top] = d + 1
+                top += 1
+                stack[top, 0] = a
+                stack[top, 1] = m
+                depth[top] = d + 1
+                top += 1
+                continue
+        n = n + 2
+        for g in range(n):
+            s, t = _curve_point(pnet, pn, c, a + GX[n, g] * (b - a), ia, ib, swapped, icoef,
+                                x, xs, xt, tangent)
+            if s < 0.0:
+                continue
+            _unit_cross(xs, xt, normal)
+            _emit_trim(x, normal, tangent, GW[n, g] * (b - a), plane, s, t,
+                       trim_x, trim_w, trim_my, trim_plane, trim_st, counts)
+
+
+@njit(cache=True)
 def _integrate_cell(pnet, pn, onet, oa, ob, ia, ib, swapped, fk, fc, fplane, kinds, nf,
                     origin, h, shape, GX, GW, rule,
                     out_st, out_x, out_w, out_n, out_e,
@@ -496,8 +410,11 @@ def _integrate_cell(pnet, pn, onet, oa, ob, ia, ib, swapped, fk, fc, fplane, kin
                     vfunc[nv] = f
                     nv += 1
     bp[:nbp].sort()
-    # crossings of graph roots of planes of different axes
-    K = 8
+    # crossings of graph roots of planes of different axes, found by sign changes of the
+    # root difference at samples that crowd toward the ends (a root may only exist a hair
+    # inside its interval)
+    samples = np.array([1e-12, 1e-9, 1e-6, 1e-3, 0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875,
+                        1.0 - 1e-3, 1.0 - 1e-6, 1.0 - 1e-9, 1.0 - 1e-12])
     extra = np.empty(4 * MAX_ROOTS)
     nextra = 0
     for iv in range(nbp - 1):
@@ -511,29 +428,22 @@ def _integrate_cell(pnet, pn, onet, oa, ob, ia, ib, swapped, fk, fc, fplane, kin
             for b in range(a + 1, nf):
                 if kinds[b] != 1 or fk[a] == fk[b]:
                     continue
+                have_prev = False
                 prev_d = 0.0
                 prev_x = 0.0
-                ok = True
-                for k in range(K + 1):
-                    if k == 0:
-                        x = x0 + 1e-12 * (x1 - x0)
-                    elif k == K:
-                        x = x1 - 1e-12 * (x1 - x0)
-                    else:
-                        x = x0 + (x1 - x0) * k / K
+                for k in range(samples.shape[0]):
+                    x = x0 + (x1 - x0) * samples[k]
                     ra = _inner_root(pn, fk[a], fc[a], x, ia, ib, icoef)
                     rb = _inner_root(pn, fk[b], fc[b], x, ia, ib, icoef)
                     if ra < 0.0 or rb < 0.0:
-                        ok = False
-                        break
+                        continue  # a root at the very end of its interval of existence
                     d = ra - rb
-                    if k > 0 and (d > 0.0) != (prev_d > 0.0) and nextra < extra.shape[0]:
+                    if have_prev and (d > 0.0) != (prev_d > 0.0) and nextra < extra.shape[0]:
                         extra[nextra] = _crossing(pn, fk[a], fc[a], fk[b], fc[b], prev_x, x, ia, ib, icoef)
                         nextra += 1
+                    have_prev = True
                     prev_d = d
                     prev_x = x
-                if not ok:
-                    continue
     allbp = np.empty(nbp + nextra)
     allbp[:nbp] = bp[:nbp]
     allbp[nbp:] = extra[:nextra]
@@ -546,55 +456,82 @@ def _integrate_cell(pnet, pn, onet, oa, ob, ia, ib, swapped, fk, fc, fplane, kin
     rfs = np.empty(MAX_FUNCS, np.int64)
     seg = np.empty(MAX_FUNCS + 2)
     normal = np.empty(3)
-    tangent = np.empty(3)
     log_tol = rule[0]
     n_min = int(rule[1])
     n_max = int(rule[2])
+    tol_roots = CURVE_TOL_FACTOR * np.exp(log_tol)
+    istack = np.empty((64, 2))
+    idepth = np.empty(64, np.int64)
     for iv in range(allbp.shape[0] - 1):
+        if allbp[iv + 1] - allbp[iv] <= 1e-14:
+            continue
+        # adaptive: an interval is accepted when n- and (n+2)-point rules agree on the
+        # integral of the inner roots (what splits the surface between elements)
+        istack[0, 0] = allbp[iv]
+        istack[0, 1] = allbp[iv + 1]
+        idepth[0] = 0
+        itop = 1
+        while itop > 0:
+            itop -= 1
+            x0 = istack[itop, 0]
+            x1 = istack[itop, 1]
+            dd = idepth[itop]
+            span = x1 - x0
+            for f in range(nf):
+                if kinds[f] != 1:
+                    continue
+                r0 = _inner_root(pn, fk[f], fc[f], x0 + 1e-9 * (x1 - x0), ia, ib, icoef)
+                r1 = _inner_root(pn, fk[f], fc[f], x1 - 1e-9 * (x1 - x0), ia, ib, icoef)
+                if r0 >= 0.0 and r1 >= 0.0:
+                    span = max(span, abs(r1 - r0))
+            no = gauss_order(span, log_tol, n_min, n_max - 2)
+            if dd < 48 and itop + 2 <= 64 and x1 - x0 > MIN_INTERVAL:
+                lo_sum = _root_sum(pn, fk, fc, kinds, nf, x0, x1, no, GX, GW, ia, ib, icoef, rts, rfs)
+                hi_sum = _root_sum(pn, fk, fc, kinds, nf, x0, x1, no + 2, GX, GW, ia, ib, icoef, rts, rfs)
+                if abs(lo_sum - hi_sum) > tol_roots * (x1 - x0):
+                    xm = 0.5 * (x0 + x1)
+                    istack[itop, 0] = xm
+                    istack[itop, 1] = x1
+                    idepth[itop] = dd + 1
+                    itop += 1
+                    istack[itop, 0] = x0
+                    istack[itop, 1] = xm
+                    idepth[itop] = dd + 1
+                    itop += 1
+                    continue
+            no = no + 2
+            for g in range(no):
+                sigma = x0 + GX[no, g] * (x1 - x0)
+                wsig = GW[no, g] * (x1 - x0)
+                n = _roots_at(pn, fk, fc, kinds, nf, sigma, ia, ib, icoef, rts, rfs)
+                seg[0] = ia
+                for r in range(n):
+                    seg[r + 1] = rts[r]
+                seg[n + 1] = ib
+                for sgi in range(n + 1):
+                    t0 = seg[sgi]
+                    t1 = seg[sgi + 1]
+                    if t1 <= t0:
+                        continue
+                    s, t = _map_st(sigma, 0.5 * (t0 + t1), swapped)
+                    point_derivs(pnet, s, t, x, xs, xt)
+                    _element_of(x, origin, h, shape, ijk)
+                    ni = gauss_order(t1 - t0, log_tol, n_min, n_max)
+                    for gg in range(ni):
+                        s, t = _map_st(sigma, t0 + GX[ni, gg] * (t1 - t0), swapped)
+                        _emit_surface(pnet, s, t, wsig * GW[ni, gg] * (t1 - t0), ijk,
+                                      out_st, out_x, out_w, out_n, out_e, counts)
+        # trimming curves on planes x = const, each integrated adaptively
         x0 = allbp[iv]
         x1 = allbp[iv + 1]
-        if x1 - x0 <= 1e-14:
-            continue
-        no = gauss_order(x1 - x0, log_tol, n_min, n_max)
-        for g in range(no):
-            sigma = x0 + GX[no, g] * (x1 - x0)
-            wsig = GW[no, g] * (x1 - x0)
-            n = _roots_at(pn, fk, fc, kinds, nf, sigma, ia, ib, icoef, rts, rfs)
-            seg[0] = ia
-            for r in range(n):
-                seg[r + 1] = rts[r]
-            seg[n + 1] = ib
-            for sgi in range(n + 1):
-                t0 = seg[sgi]
-                t1 = seg[sgi + 1]
-                if t1 <= t0:
-                    continue
-                s, t = _map_st(sigma, 0.5 * (t0 + t1), swapped)
-                point_derivs(pnet, s, t, x, xs, xt)
-                _element_of(x, origin, h, shape, ijk)
-                ni = gauss_order(t1 - t0, log_tol, n_min, n_max)
-                for gg in range(ni):
-                    s, t = _map_st(sigma, t0 + GX[ni, gg] * (t1 - t0), swapped)
-                    _emit_surface(pnet, s, t, wsig * GW[ni, gg] * (t1 - t0), ijk,
-                                  out_st, out_x, out_w, out_n, out_e, counts)
-            for r in range(n):
-                f = rfs[r]
-                if fk[f] != 0:
-                    continue
-                s, t = _map_st(sigma, rts[r], swapped)
-                point_derivs(pnet, s, t, x, xs, xt)
-                if swapped:
-                    xo = xt
-                    xi = xs
-                else:
-                    xo = xs
-                    xi = xt
-                slope = -xo[0] / xi[0]
-                for c in range(3):
-                    tangent[c] = xo[c] + xi[c] * slope
-                _unit_cross(xs, xt, normal)
-                _emit_trim(x, normal, tangent, wsig, fplane[f], s, t,
-                           trim_x, trim_w, trim_my, trim_plane, trim_st, counts)
+        xm = 0.5 * (x0 + x1)
+        for f in range(nf):
+            if fk[f] != 0 or kinds[f] != 1:
+                continue
+            if _inner_root(pn, 0, fc[f], xm, ia, ib, icoef) < 0.0:
+                continue
+            _trim_curve(pnet, pn, fc[f], fplane[f], x0, x1, ia, ib, swapped, GX, GW, rule, icoef,
+                        trim_x, trim_w, trim_my, trim_plane, trim_st, counts)
     # trimming lines of planes constant along the inner direction
     for v in range(nv):
         f = vfunc[v]

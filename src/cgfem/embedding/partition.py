@@ -23,7 +23,7 @@ from cgfem.geometry.solid import Solid
 #: :func:`cgfem.embedding._partition_kernels.gauss_order`), and the fewest and most points
 #: per direction and interval. Two points integrate the bilinear products of H8 shape
 #: functions exactly on flat faces.
-DEFAULT_TOL = 1e-13
+DEFAULT_TOL = 1e-9
 MIN_POINTS = 2
 MAX_POINTS = 12
 #: Subdivision depth at which a cell is integrated without exact splitting (tangencies only).
