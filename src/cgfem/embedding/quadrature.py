@@ -1,0 +1,116 @@
+"""Embedding of one body in its Cartesian grid: element status and quadrature rules.
+
+:func:`embed` classifies every grid element as outside, inside or cut and builds
+
+- the volume rule: 2x2x2 Gauss points on inside elements (exact for polynomials of degree
+  <= 3 in each variable), moment-fitted points on cut elements
+  (:mod:`cgfem.embedding.moments`);
+- the surface rule on the exact NURBS boundary, per patch, with ``(xi, eta)``, outward
+  normals and owning elements (:mod:`cgfem.embedding.partition`).
+
+An element is cut when a piece of the boundary of positive area lies in it, whatever the
+signs of its nodes (a surface that enters and leaves through one face, a tube thinner than
+the element); otherwise it is inside or outside as its nodes are.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cgfem.embedding.grid import CartesianGrid
+from cgfem.embedding.lines import cast_z_lines
+from cgfem.embedding.moments import DEFAULT_POINTS, VolumeRule, fitted_volume_rule
+from cgfem.embedding.partition import DEFAULT_TOL, SurfaceQuadrature, partition_surface
+from cgfem.geometry.bvh import SurfaceIndex
+from cgfem.geometry.solid import Solid
+
+OUTSIDE, INSIDE, CUT = 0, 1, 2
+SURFACE_DEFINITIONS = ("nurbs", "facets")
+
+
+@dataclass(frozen=True)
+class Embedding:
+    """A body in its grid.
+
+    status : (n_elements,) int8, OUTSIDE / INSIDE / CUT per grid element
+    volume : volume rule over the active (inside and cut) elements
+    surface : boundary rule; ``surface.patch`` indexes ``patch_names``
+    """
+
+    grid: CartesianGrid
+    status: np.ndarray
+    volume: VolumeRule
+    surface: SurfaceQuadrature
+    patch_names: tuple[str, ...]
+
+    @property
+    def active_elements(self) -> np.ndarray:
+        """Ids of the inside and cut elements, ascending."""
+        return np.flatnonzero(self.status != OUTSIDE)
+
+    @property
+    def active_nodes(self) -> np.ndarray:
+        """Ids of the nodes of active elements, ascending."""
+        return np.unique(self.grid.element_nodes(self.active_elements))
+
+    def counts(self) -> dict[str, int]:
+        return {"inside": int(np.sum(self.status == INSIDE)), "cut": int(np.sum(self.status == CUT)),
+                "active": int(np.sum(self.status != OUTSIDE)), "nodes": int(self.active_nodes.size)}
+
+    def area_by_name(self) -> dict[str, float]:
+        """Surface-rule area of every named surface."""
+        areas = np.bincount(self.surface.patch, self.surface.w, minlength=len(self.patch_names))
+        out = dict.fromkeys(dict.fromkeys(self.patch_names), 0.0)
+        for name, area in zip(self.patch_names, areas):
+            out[name] += float(area)
+        return out
+
+
+def grid_for(solid: Solid, h0: float, level: int, offset=(0.0, 0.0, 0.0)) -> CartesianGrid:
+    """The grid of ``level`` covering the control points of ``solid`` (which contain it)."""
+    pts = np.concatenate([p.surface.points.reshape(-1, 3) for p in solid.patches])
+    return CartesianGrid.covering(pts.min(axis=0), pts.max(axis=0), h0, level, offset)
+
+
+def _interior_rule(grid: CartesianGrid, elements: np.ndarray) -> VolumeRule:
+    g = np.array([-1.0, 1.0]) / np.sqrt(3.0)
+    local = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+    centre = grid.element_center(grid.element_ijk(elements))
+    x = centre[:, None, :] + 0.5 * grid.h * local[None, :, :]
+    w = np.full(x.shape[:2], (0.5 * grid.h) ** 3)
+    return VolumeRule(x.reshape(-1, 3), w.reshape(-1), np.repeat(elements, 8))
+
+
+def embed(solid: Solid, grid: CartesianGrid, surface: str = "nurbs", tol: float = DEFAULT_TOL,
+          points: int = DEFAULT_POINTS, index: SurfaceIndex | None = None) -> Embedding:
+    """Classify the elements of ``grid`` and build the quadrature of ``solid`` for the
+    surface definition ``surface`` (``nurbs``: exact NURBS boundary; ``facets``: see
+    :mod:`cgfem.embedding.facets`)."""
+    if surface not in SURFACE_DEFINITIONS:
+        raise ValueError(f"unknown surface definition {surface!r} (known: {', '.join(SURFACE_DEFINITIONS)})")
+    if surface == "facets":
+        raise NotImplementedError("the facets definition is not built yet")
+    index = SurfaceIndex.build(solid) if index is None else index
+    lines = cast_z_lines(index, grid)
+    part = partition_surface(solid, grid, tol)
+    status = np.zeros(grid.n_elements, np.int8)
+    # uncut elements take the status of their node (i+1, j+1, k)
+    node_inside = lines.nodes_inside()
+    ijk = grid.element_ijk(np.arange(grid.n_elements))
+    status[node_inside[grid.node_id(ijk + [1, 1, 0])]] = INSIDE
+    cut = np.unique(part.surface.element[part.surface.w > 0.0])
+    status[cut] = CUT
+    cut_ijk = grid.element_ijk(cut)
+    z0 = grid.plane(2, cut_ijk[:, 2])
+    edges = [lines.inside_intervals(i + 1, j + 1, a, a + grid.h)
+             for (i, j, _), a in zip(cut_ijk, z0)]
+    s, t = part.surface, part.trims
+    cut_rule = fitted_volume_rule(grid, cut, s.x, s.w, s.normal[:, 0], s.element,
+                                  t.x, t.w, t.m_y, t.element, edges, n=points)
+    inner = _interior_rule(grid, np.flatnonzero(status == INSIDE))
+    volume = VolumeRule(*(np.concatenate([getattr(inner, f), getattr(cut_rule, f)])
+                          for f in ("x", "w", "element")))
+    names = tuple(p.name for p in solid.patches)
+    return Embedding(grid, status, volume, part.surface, names)
