@@ -140,3 +140,21 @@ def test_console_script_exit_code_and_no_traceback(tmp_path):
     assert "Traceback" not in proc.stderr
     assert proc.stderr.strip() == ("cgfem: error: bodies.ring.geometry.minor_radius: must be smaller "
                                    "than major_radius (0.03 >= 0.02)")
+
+
+def test_check_level_reports_grid_quadrature(tmp_path, capsys):
+    """The JSON contract of DESIGN.md: volume, area, brep_*, elements, nodes per body."""
+    assert main(["check", _write(tmp_path, GOOD), "--level", "0", "--json",
+                 "--vtu", str(tmp_path / "vtu")]) == 0
+    bodies = json.loads(capsys.readouterr().out)["bodies"]
+    for body in bodies.values():
+        assert set(body) >= {"volume", "area", "brep_volume", "brep_area", "elements", "nodes"}
+        assert body["volume"] == pytest.approx(body["brep_volume"], rel=1e-8)
+        assert body["area"] == pytest.approx(body["brep_area"], rel=1e-8)
+        assert body["elements"]["cut"] > 0
+    assert len(list((tmp_path / "vtu").glob("*.vtu"))) == 6
+
+
+def test_check_level_needs_nonnegative(tmp_path, capsys):
+    assert main(["check", _write(tmp_path, GOOD), "--level", "-1"]) == 2
+    assert "--level" in capsys.readouterr().err

@@ -1,9 +1,11 @@
 """The ``cgfem`` command line.
 
-``cgfem check CASE.yaml [--json]`` validates a case file, builds every body's exact geometry
-and prints, per body, the B-rep volume and the area of each named patch (computed from the
-NURBS surfaces alone). Exit codes: 0 success, 2 bad input (one line on stderr naming the
-offending field, no traceback).
+``cgfem check CASE.yaml [--level L [--surface S]] [--json] [--vtu DIR]`` validates a case
+file, builds every body's exact geometry and prints, per body, the B-rep volume and the area
+of each named patch (computed from the NURBS surfaces alone). With ``--level`` it also embeds
+every body in its grid of that level and prints the element counts and the volume and areas
+of the quadrature of the surface definition ``S``. Exit codes: 0 success, 2 bad input (one
+line on stderr naming the offending field, no traceback).
 """
 
 from __future__ import annotations
@@ -22,6 +24,29 @@ EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
 
 
+#: contact surface definitions (DESIGN.md) and the quadrature each one integrates on
+SURFACES = {"facets": "facets", "nurbs_fe": "nurbs", "nurbs_fit": "nurbs"}
+
+
+@dataclass(frozen=True)
+class GridReport:
+    """The embedding of a body at one level (SI units)."""
+
+    level: int
+    surface: str
+    h: float
+    counts: dict[str, int]
+    volume: float
+    patch_areas: dict[str, float]
+
+    def as_dict(self) -> dict:
+        return {"level": self.level, "surface": self.surface, "h": self.h, "volume": self.volume,
+                "area": sum(self.patch_areas.values()),
+                "elements": {"inside": self.counts["inside"], "cut": self.counts["cut"],
+                             "active": self.counts["active"]},
+                "nodes": self.counts["nodes"]}
+
+
 @dataclass(frozen=True)
 class BodyReport:
     """What ``cgfem check`` reports of one body (SI units)."""
@@ -29,18 +54,26 @@ class BodyReport:
     name: str
     patch_areas: dict[str, float]
     brep_volume: float
+    grid: GridReport | None = None
 
     @property
     def brep_area(self) -> float:
         return sum(self.patch_areas.values())
 
     def as_dict(self) -> dict:
-        return {"brep_volume": self.brep_volume, "brep_area": self.brep_area,
-                "patches": {name: {"area": area} for name, area in self.patch_areas.items()}}
+        out = {"brep_volume": self.brep_volume, "brep_area": self.brep_area,
+               "patches": {name: {"area": area} for name, area in self.patch_areas.items()}}
+        if self.grid is not None:
+            out.update(self.grid.as_dict())
+            for name, area in self.grid.patch_areas.items():
+                out["patches"][name]["quadrature_area"] = area
+        return out
 
 
-def check_case(path: str) -> list[BodyReport]:
-    """Validate the case at ``path`` and measure its bodies; raises :class:`InputError`."""
+def check_case(path: str, level: int | None = None, surface: str = "nurbs_fe",
+               vtu: str | None = None) -> list[BodyReport]:
+    """Validate the case at ``path``, measure its bodies and, if ``level`` is given, embed
+    them in their grids (writing VTU files to ``vtu`` if given); raises :class:`InputError`."""
     from cgfem.case import check_patch_names, load_case
     from cgfem.geometry.builders import build_solid
     from cgfem.geometry.measure import areas_by_name, volume
@@ -53,7 +86,27 @@ def check_case(path: str) -> list[BodyReport]:
         except InputError as err:
             raise err.within(f"bodies.{body.name}.geometry") from None
     check_patch_names(case, {name: solid.patch_names for name, solid in solids.items()})
-    return [BodyReport(name, areas_by_name(solid), volume(solid)) for name, solid in solids.items()]
+    reports = []
+    for body in case.bodies:
+        solid = solids[body.name]
+        grid_report = None
+        if level is not None:
+            grid_report = _embed_report(solid, body, level, surface, vtu)
+        reports.append(BodyReport(body.name, areas_by_name(solid), volume(solid), grid_report))
+    return reports
+
+
+def _embed_report(solid, body, level: int, surface: str, vtu: str | None) -> GridReport:
+    from cgfem.embedding.quadrature import embed, grid_for
+
+    grid = grid_for(solid, body.grid.h0, level, body.grid.offset)
+    emb = embed(solid, grid, SURFACES[surface])
+    if vtu is not None:
+        from cgfem.embedding.export import write_embedding_vtu
+
+        write_embedding_vtu(emb, vtu, f"{body.name}_L{level}_{surface}")
+    return GridReport(level, surface, grid.h, emb.counts(), float(emb.volume.w.sum()),
+                      emb.area_by_name())
 
 
 def _format_table(reports: Sequence[BodyReport]) -> str:
@@ -61,14 +114,27 @@ def _format_table(reports: Sequence[BodyReport]) -> str:
     for rep in reports:
         lines.append(f"body {rep.name}: B-rep volume {rep.brep_volume:.12g} m^3, "
                      f"area {rep.brep_area:.12g} m^2")
+        g = rep.grid
+        if g is not None:
+            c = g.counts
+            lines.append(f"  level {g.level} ({g.surface}), h = {g.h:.6g} m: {c['inside']} inside + "
+                         f"{c['cut']} cut elements, {c['nodes']} nodes; quadrature volume "
+                         f"{g.volume:.12g} m^3 (relative error {g.volume / rep.brep_volume - 1:+.2e})")
         width = max(len(n) for n in rep.patch_areas)
         for name, area in rep.patch_areas.items():
-            lines.append(f"  patch {name:<{width}}  area {area:.12g} m^2")
+            line = f"  patch {name:<{width}}  area {area:.12g} m^2"
+            if g is not None:
+                line += f"  quadrature {g.patch_areas[name]:.12g} m^2"
+            lines.append(line)
     return "\n".join(lines)
 
 
 def _cmd_check(args: argparse.Namespace) -> int:
-    reports = check_case(args.case)
+    if args.level is not None and args.level < 0:
+        raise InputError("--level", f"must be >= 0, got {args.level}")
+    if args.vtu is not None and args.level is None:
+        raise InputError("--vtu", "needs --level")
+    reports = check_case(args.case, args.level, args.surface, args.vtu)
     if args.json:
         print(json.dumps({"bodies": {r.name: r.as_dict() for r in reports}}, indent=2))
     else:
@@ -84,6 +150,12 @@ def build_parser() -> argparse.ArgumentParser:
     check = sub.add_parser("check", help="validate a case file and print geometry statistics")
     check.add_argument("case", help="case file (YAML)")
     check.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    check.add_argument("--level", type=int, default=None,
+                       help="embed the bodies in their grids of this level (h = h0 / 2^level)")
+    check.add_argument("--surface", choices=sorted(SURFACES), default="nurbs_fe",
+                       help="surface definition of the quadrature (default nurbs_fe)")
+    check.add_argument("--vtu", default=None, metavar="DIR",
+                       help="write the grid and the quadrature points as VTU files to DIR")
     check.set_defaults(func=_cmd_check)
     return parser
 
