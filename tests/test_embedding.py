@@ -168,3 +168,35 @@ def test_grid_refinement_is_nested():
         assert np.all(np.min(np.abs(coarse_planes[:, None] - fine_planes[None, :]), axis=1) < 1e-15)
     ids = np.arange(grid.n_elements)
     assert np.array_equal(grid.element_id(grid.element_ijk(ids)), ids)
+
+
+@pytest.mark.parametrize("name", ["sphere", "torus", "half_torus", "box"])
+def test_offset_zero_with_round_coordinates(name):
+    """Grid planes through the centre, poles, tangent planes and planar faces (offset 0 and
+    round CAD coordinates): the grid is nudged by 1e-3 h0 and everything stays exact."""
+    spec = {"sphere": SphereSpec((0, 0, 0), 0.01),
+            "torus": TorusSpec((0, 0, 0), (0, 0, 1), R, r),
+            "half_torus": HalfTorusSpec((0, 0, 0), (0, 0, 1), R, r, (0, 1, 0)),
+            "box": BoxSpec((0.0, 0.0, 0.0), (0.0025, 0.01, 0.01))}[name]
+    solid = build_solid(spec)
+    for level in (0, 1):
+        grid = grid_for(solid, 0.005 if name != "box" else 0.00125, level, (0.0, 0.0, 0.0))
+        emb = embed(solid, grid)
+        assert emb.volume.w.sum() == pytest.approx(volume(solid), rel=1e-8)
+        assert emb.surface.w.sum() == pytest.approx(sum(areas_by_name(solid).values()), rel=1e-8)
+
+
+def test_facets_definition_through_embed():
+    """The facets polyhedron is inscribed in the convex sphere: smaller volume and area,
+    second order in h, and its rules agree with the divergence theorem for f = x."""
+    solid = build_solid(SphereSpec((0.0003, -0.0002, 0.0001), 0.01))
+    errors = []
+    for level in range(3):
+        grid = grid_for(solid, 0.005, level, (0.37, 0.11, 0.83))
+        emb = embed(solid, grid, "facets")
+        v = emb.volume.w.sum()
+        assert v < volume(solid) and emb.surface.w.sum() < 4 * math.pi * 0.01**2
+        assert np.sum(emb.surface.w * emb.surface.normal[:, 0] * emb.surface.x[:, 0]) == pytest.approx(v, rel=1e-12)
+        errors.append(1 - v / volume(solid))
+    order = np.polyfit(np.log([0.005 / 2**k for k in range(3)]), np.log(errors), 1)[0]
+    assert 1.7 < order < 2.4

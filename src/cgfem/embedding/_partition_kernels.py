@@ -31,6 +31,8 @@ from numba import njit
 from cgfem.embedding._bernstein import _inner_root, _split_net, point_derivs, univariate_roots
 
 MAX_FUNCS = 16
+#: a grid plane closer than TOUCH * h to a cell's whole control net only touches it
+TOUCH = 1e-12
 #: fewest Gauss points along the outer direction of an interval crossed by a trimming curve
 N_CURVE = 5
 #: the adaptive check of trimming curves accepts errors of this many times the tolerance
@@ -60,6 +62,22 @@ def _element_of(x, origin, h, shape, ijk):
     for a in range(3):
         i = int(np.floor((x[a] - origin[a]) / h))
         ijk[a] = min(max(i, 0), shape[a] - 1)
+
+
+@njit(cache=True)
+def _material_element(pnet, s, t, origin, h, shape, x, xs, xt, ijk):
+    """Element of the surface point at ``(s, t)``, looked up a hair (1e-9 h) inside the
+    material, so that a surface lying in a grid plane belongs to the element it bounds."""
+    point_derivs(pnet, s, t, x, xs, xt)
+    n = np.empty(3)
+    n[0] = xs[1] * xt[2] - xs[2] * xt[1]
+    n[1] = xs[2] * xt[0] - xs[0] * xt[2]
+    n[2] = xs[0] * xt[1] - xs[1] * xt[0]
+    norm = np.sqrt(n[0] ** 2 + n[1] ** 2 + n[2] ** 2)
+    y = np.empty(3)
+    for a in range(3):
+        y[a] = x[a] - (1e-9 * h * n[a] / norm if norm > 0.0 else 0.0)
+    _element_of(y, origin, h, shape, ijk)
 
 
 @njit(cache=True)
@@ -123,8 +141,7 @@ def _emit_cell(pnet, sa, sb, ta, tb, origin, h, shape, GX, GW, rule,
     xs = np.empty(3)
     xt = np.empty(3)
     ijk = np.empty(3, np.int64)
-    point_derivs(pnet, 0.5 * (sa + sb), 0.5 * (ta + tb), x, xs, xt)
-    _element_of(x, origin, h, shape, ijk)
+    _material_element(pnet, 0.5 * (sa + sb), 0.5 * (ta + tb), origin, h, shape, x, xs, xt, ijk)
     for a in range(ns):
         s = sa + GX[ns, a] * (sb - sa)
         for b in range(nt):
@@ -169,7 +186,19 @@ def _classify(cnet, fk, fc, nf, inner, kinds):
                         dmax = max(dmax, dp)
                     else:
                         omax = max(omax, dp)
-        if dmax <= 1e-13 * big:
+        # constant along inner: the Cartesian control coordinates x_k do not change along it
+        # (with tensor-product weights the surface coordinate then does not depend on it)
+        cvar = 0.0
+        cbig = abs(c)
+        for i in range(p + 1):
+            for j in range(q + 1):
+                xk = cnet[i, j, k] / cnet[i, j, 3]
+                cbig = max(cbig, abs(xk))
+                if inner == 1 and j < q:
+                    cvar = max(cvar, abs(cnet[i, j + 1, k] / cnet[i, j + 1, 3] - xk))
+                elif inner == 0 and i < p:
+                    cvar = max(cvar, abs(cnet[i + 1, j, k] / cnet[i + 1, j, 3] - xk))
+        if dmax <= 1e-13 * big or cvar <= 1e-14 * cbig:
             kinds[f] = 2
             continue
         pos = True
@@ -514,8 +543,7 @@ def _integrate_cell(pnet, pn, onet, oa, ob, ia, ib, swapped, fk, fc, fplane, kin
                     if t1 <= t0:
                         continue
                     s, t = _map_st(sigma, 0.5 * (t0 + t1), swapped)
-                    point_derivs(pnet, s, t, x, xs, xt)
-                    _element_of(x, origin, h, shape, ijk)
+                    _material_element(pnet, s, t, origin, h, shape, x, xs, xt, ijk)
                     ni = gauss_order(t1 - t0, log_tol, n_min, n_max)
                     for gg in range(ni):
                         s, t = _map_st(sigma, t0 + GX[ni, gg] * (t1 - t0), swapped)
@@ -600,6 +628,7 @@ def partition_piece(pnet, origin, h, shape, GX, GW, rule, max_depth,
     kinds = np.empty(MAX_FUNCS, np.int64)
     lo = np.empty(3)
     hi = np.empty(3)
+    touch = TOUCH * h
     while top > 0:
         if counts[3] != 0:
             return
@@ -626,16 +655,18 @@ def partition_piece(pnet, origin, h, shape, GX, GW, rule, max_depth,
             i1 = int(np.ceil((hi[a] - origin[a]) / h))
             for ip in range(i0, i1 + 1):
                 c = origin[a] + ip * h
-                if not (lo[a] < c < hi[a]):
+                if not (lo[a] + touch < c < hi[a] - touch):
                     continue
+                # a plane that only touches the control net (within ``touch``, e.g. tangent
+                # to the surface along a knot line) does not cut the cell
                 pos = True
                 neg = True
                 for i in range(p + 1):
                     for j in range(q + 1):
-                        v = cnet[i, j, a] - c * cnet[i, j, 3]
-                        if not v > 0.0:
+                        v = cnet[i, j, a] / cnet[i, j, 3] - c
+                        if not v > -touch:
                             pos = False
-                        if not v < 0.0:
+                        if not v < touch:
                             neg = False
                 if pos or neg:
                     continue

@@ -19,11 +19,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cgfem.embedding.facets import facet_embedding_parts
 from cgfem.embedding.grid import CartesianGrid
 from cgfem.embedding.lines import cast_z_lines
 from cgfem.embedding.moments import DEFAULT_POINTS, VolumeRule, fitted_volume_rule
 from cgfem.embedding.partition import DEFAULT_TOL, SurfaceQuadrature, partition_surface
 from cgfem.geometry.bvh import SurfaceIndex
+from cgfem.geometry.inside import points_inside
 from cgfem.geometry.solid import Solid
 
 OUTSIDE, INSIDE, CUT = 0, 1, 2
@@ -68,10 +70,32 @@ class Embedding:
         return out
 
 
+#: relative shift (of h0) applied to an axis whose grid planes would contain control points
+NUDGE = 1e-3
+
+
 def grid_for(solid: Solid, h0: float, level: int, offset=(0.0, 0.0, 0.0)) -> CartesianGrid:
-    """The grid of ``level`` covering the control points of ``solid`` (which contain it)."""
+    """The grid of ``level`` covering the control points of ``solid`` (which contain it).
+
+    A grid plane through a control point of the geometry (a planar face in a grid plane, a
+    plane tangent to a torus along a knot line, a pole on a grid line: round CAD coordinates
+    with offset 0) makes the cut-cell problem degenerate. Such an axis is shifted by
+    ``NUDGE * h0`` (times 1.6, 2.2, ... until no plane is within 1e-9 h of a control point).
+    The geometry and its integrals stay exact; only the grid moves, by a thousandth of h0.
+    """
     pts = np.concatenate([p.surface.points.reshape(-1, 3) for p in solid.patches])
-    return CartesianGrid.covering(pts.min(axis=0), pts.max(axis=0), h0, level, offset)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    offset = np.asarray(offset, float).copy()
+    h = h0 / 2.0**level
+    for axis in range(3):
+        coords = np.unique(pts[:, axis])
+        for attempt in range(1, 20):
+            base = offset[axis] * h0
+            distance = np.abs((coords - base) / h - np.round((coords - base) / h))
+            if np.all(distance > 1e-9):
+                break
+            offset[axis] = (offset[axis] + NUDGE * (1.0 + 0.618 * attempt)) % 1.0
+    return CartesianGrid.covering(lo, hi, h0, level, offset)
 
 
 def _interior_rule(grid: CartesianGrid, elements: np.ndarray) -> VolumeRule:
@@ -86,22 +110,25 @@ def _interior_rule(grid: CartesianGrid, elements: np.ndarray) -> VolumeRule:
 def embed(solid: Solid, grid: CartesianGrid, surface: str = "nurbs", tol: float = DEFAULT_TOL,
           points: int = DEFAULT_POINTS, index: SurfaceIndex | None = None) -> Embedding:
     """Classify the elements of ``grid`` and build the quadrature of ``solid`` for the
-    surface definition ``surface`` (``nurbs``: exact NURBS boundary; ``facets``: see
-    :mod:`cgfem.embedding.facets`)."""
+    surface definition ``surface`` (``nurbs``: exact NURBS boundary; ``facets``: the
+    marching-cubes polyhedron of :mod:`cgfem.embedding.facets`)."""
     if surface not in SURFACE_DEFINITIONS:
         raise ValueError(f"unknown surface definition {surface!r} (known: {', '.join(SURFACE_DEFINITIONS)})")
-    if surface == "facets":
-        raise NotImplementedError("the facets definition is not built yet")
     index = SurfaceIndex.build(solid) if index is None else index
+    names = tuple(p.name for p in solid.patches)
+    if surface == "facets":
+        parts = facet_embedding_parts(solid, grid, index)
+        return _assemble(grid, parts.status, parts.cut_volume_rule(points), parts.surface, names)
     lines = cast_z_lines(index, grid)
     part = partition_surface(solid, grid, tol)
     status = np.zeros(grid.n_elements, np.int8)
-    # uncut elements take the status of their node (i+1, j+1, k)
-    node_inside = lines.nodes_inside()
-    ijk = grid.element_ijk(np.arange(grid.n_elements))
-    status[node_inside[grid.node_id(ijk + [1, 1, 0])]] = INSIDE
     cut = np.unique(part.surface.element[part.surface.w > 0.0])
     status[cut] = CUT
+    # an uncut element is wholly inside or outside: ask at its centre, which is h/2 away
+    # from any boundary on its faces (a node may lie on the boundary)
+    uncut = np.flatnonzero(status != CUT)
+    centres = grid.element_center(grid.element_ijk(uncut))
+    status[uncut[points_inside(index, centres)]] = INSIDE
     cut_ijk = grid.element_ijk(cut)
     z0 = grid.plane(2, cut_ijk[:, 2])
     edges = [lines.inside_intervals(i + 1, j + 1, a, a + grid.h)
@@ -109,8 +136,12 @@ def embed(solid: Solid, grid: CartesianGrid, surface: str = "nurbs", tol: float 
     s, t = part.surface, part.trims
     cut_rule = fitted_volume_rule(grid, cut, s.x, s.w, s.normal[:, 0], s.element,
                                   t.x, t.w, t.m_y, t.element, edges, n=points)
+    return _assemble(grid, status, cut_rule, part.surface, names)
+
+
+def _assemble(grid: CartesianGrid, status: np.ndarray, cut_rule: VolumeRule,
+              surface: SurfaceQuadrature, names: tuple[str, ...]) -> Embedding:
     inner = _interior_rule(grid, np.flatnonzero(status == INSIDE))
     volume = VolumeRule(*(np.concatenate([getattr(inner, f), getattr(cut_rule, f)])
                           for f in ("x", "w", "element")))
-    names = tuple(p.name for p in solid.patches)
-    return Embedding(grid, status, volume, part.surface, names)
+    return Embedding(grid, status, volume, surface, names)
