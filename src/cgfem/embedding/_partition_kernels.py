@@ -31,6 +31,8 @@ from numba import njit
 from cgfem.embedding._bernstein import _inner_root, _split_net, point_derivs, univariate_roots
 
 MAX_FUNCS = 16
+#: uniform samples of the root difference of two planes per interval (crossing search)
+CROSSING_SAMPLES = 32
 #: a grid plane closer than TOUCH * h to a cell's whole control net only touches it
 TOUCH = 1e-12
 #: fewest Gauss points along the outer direction of an interval crossed by a trimming curve
@@ -442,8 +444,12 @@ def _integrate_cell(pnet, pn, onet, oa, ob, ia, ib, swapped, fk, fc, fplane, kin
     # crossings of graph roots of planes of different axes, found by sign changes of the
     # root difference at samples that crowd toward the ends (a root may only exist a hair
     # inside its interval)
-    samples = np.array([1e-12, 1e-9, 1e-6, 1e-3, 0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875,
-                        1.0 - 1e-3, 1.0 - 1e-6, 1.0 - 1e-9, 1.0 - 1e-12])
+    samples = np.empty(CROSSING_SAMPLES + 7)
+    ends = np.array([1e-12, 1e-9, 1e-6, 1e-3])
+    samples[:4] = ends
+    for k in range(1, CROSSING_SAMPLES):
+        samples[3 + k] = k / CROSSING_SAMPLES
+    samples[CROSSING_SAMPLES + 3:] = 1.0 - ends[::-1]
     extra = np.empty(4 * MAX_ROOTS)
     nextra = 0
     for iv in range(nbp - 1):
