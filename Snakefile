@@ -1,5 +1,6 @@
-# Regenerates the paper's figures. Today the pipeline validates every case and measures its
-# exact geometry; solving and plotting join as the library grows.
+# Regenerates the paper's figures. Today the pipeline validates every case, measures its exact
+# geometry and embeds every body at each level and surface definition; solving and plotting
+# join as the library grows.
 from snakemake.utils import validate
 
 
@@ -15,3 +16,9 @@ include: "workflow/rules/check.smk"
 rule all:
     input:
         expand("results/check/{case}.json", case=config["cases"]),
+        expand(
+            "results/embedding/{case}_L{level}_{surface}.json",
+            case=config["cases"],
+            level=config["levels"],
+            surface=config["surfaces"],
+        ),
