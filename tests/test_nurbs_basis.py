@@ -13,6 +13,7 @@ import pytest
 from cgfem.errors import InputError
 from cgfem.geometry import _nurbs_kernels as K
 from cgfem.geometry.nurbs import NurbsSurface
+from nurbs_helpers import geomdl_surface
 
 
 # ----------------------------------------------------------------------------------------
@@ -207,17 +208,6 @@ def test_surface_derivatives_against_finite_differences():
             np.testing.assert_allclose(d[:, 0, 0], S.evaluate(uv), rtol=0, atol=1e-14)
 
 
-def _geomdl_surface(S: NurbsSurface):
-    from geomdl import NURBS
-
-    g = NURBS.Surface(normalize_kv=False)
-    g.degree_u, g.degree_v = S.degree
-    g.set_ctrlpts(S.control.reshape(-1, 4).tolist(), *S.control.shape[:2])
-    g.knotvector_u = S.knots_u.tolist()
-    g.knotvector_v = S.knots_v.tolist()
-    return g
-
-
 def test_points_and_derivatives_match_geomdl():
     pytest.importorskip("geomdl")
     rng = np.random.default_rng(5)
@@ -226,7 +216,7 @@ def test_points_and_derivatives_match_geomdl():
         for p in range(1, 5):
             for q in range(1, 5):
                 S = random_surface(rng, p, q)
-                g = _geomdl_surface(S)
+                g = geomdl_surface(S)
                 uv = np.vstack([rng.uniform(0.0, 1.0, (4, 2)), [[0.0, 0.0], [1.0, 1.0], [0.0, 1.0]],
                                 [[S.knots_u[p + 1], S.knots_v[-q - 2]]]])
                 points = S.evaluate(uv)

@@ -15,6 +15,7 @@ import pytest
 
 from cgfem.errors import InputError
 from cgfem.geometry.nurbs import NurbsSurface
+from nurbs_helpers import geomdl_surface
 from cgfem.geometry.refine import (
     bezier_patches,
     curve_elevate_degree,
@@ -382,17 +383,6 @@ def test_elevate_bezier_curve_by_formula():
 # ----------------------------------------------------------------------------------------
 # geomdl cross-checks
 # ----------------------------------------------------------------------------------------
-def _geomdl_surface(S: NurbsSurface):
-    from geomdl import NURBS
-
-    g = NURBS.Surface(normalize_kv=False)
-    g.degree_u, g.degree_v = S.degree
-    g.set_ctrlpts(S.control.reshape(-1, 4).tolist(), *S.control.shape[:2])
-    g.knotvector_u = S.knots_u.tolist()
-    g.knotvector_v = S.knots_v.tolist()
-    return g
-
-
 def test_insert_knot_matches_geomdl():
     pytest.importorskip("geomdl")
     from geomdl import operations
@@ -402,7 +392,7 @@ def test_insert_knot_matches_geomdl():
         p, q = S.degree
         u, v = (float(x) for x in rng.uniform(0.1, 0.9, 2))
         ru, rv = int(rng.integers(1, p + 1)), int(rng.integers(1, q + 1))
-        g = _geomdl_surface(S)
+        g = geomdl_surface(S)
         operations.insert_knot(g, [u, v], [ru, rv])
         T = insert_knot(insert_knot(S, 0, u, ru), 1, v, rv)
         np.testing.assert_allclose(np.array(g.knotvector_u), T.knots_u, rtol=0, atol=0)
@@ -416,7 +406,7 @@ def test_bezier_patches_match_geomdl_decomposition():
 
     for S in random_surfaces(80, 12) + [torus()]:
         ours = bezier_patches(S)
-        theirs = operations.decompose_surface(_geomdl_surface(S))  # u outer, v inner
+        theirs = operations.decompose_surface(geomdl_surface(S))  # u outer, v inner
         assert len(ours) == len(theirs)
         for (piece, _, _), g in zip(ours, theirs):
             np.testing.assert_allclose(np.array(g.ctrlptsw), piece.control.reshape(-1, 4), rtol=0, atol=TOL)
@@ -431,7 +421,7 @@ def test_split_matches_geomdl():
         for direction, geomdl_split in ((0, operations.split_surface_u), (1, operations.split_surface_v)):
             cut = float(rng.uniform(0.1, 0.9))
             ours = split(S, direction, cut)
-            theirs = geomdl_split(_geomdl_surface(S), cut)
+            theirs = geomdl_split(geomdl_surface(S), cut)
             for a, g in zip(ours, theirs):
                 np.testing.assert_allclose(np.array(g.ctrlptsw), a.control.reshape(-1, 4), rtol=0, atol=TOL)
 
