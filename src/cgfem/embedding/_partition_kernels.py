@@ -355,6 +355,19 @@ def _curve_length(pnet, pn, c, a, b, n, ia, ib, swapped, GX, GW, icoef):
 
 
 @njit(cache=True)
+def _push_halves(stack, depth, top, a, b, d):
+    """Push the halves of ``[a, b]`` (left on top) at depth ``d + 1``; returns the new top."""
+    m = 0.5 * (a + b)
+    stack[top, 0] = m
+    stack[top, 1] = b
+    depth[top] = d + 1
+    stack[top + 1, 0] = a
+    stack[top + 1, 1] = m
+    depth[top + 1] = d + 1
+    return top + 2
+
+
+@njit(cache=True)
 def _trim_curve(pnet, pn, c, plane, x0, x1, ia, ib, swapped, GX, GW, rule, icoef,
                 trim_x, trim_w, trim_my, trim_plane, trim_st, counts):
     """Quadrature of the trimming curve ``x = c`` over the outer interval ``[x0, x1]``:
@@ -380,18 +393,10 @@ def _trim_curve(pnet, pn, c, plane, x0, x1, ia, ib, swapped, GX, GW, rule, icoef
         d = depth[top]
         n = max(gauss_order(b - a, log_tol, int(rule[1]), int(rule[2]) - 2), N_CURVE)
         if d < 48 and top + 2 <= 64 and b - a > MIN_INTERVAL:
-            m = 0.5 * (a + b)
             coarse = _curve_length(pnet, pn, c, a, b, n, ia, ib, swapped, GX, GW, icoef)
             fine = _curve_length(pnet, pn, c, a, b, n + 2, ia, ib, swapped, GX, GW, icoef)
             if abs(coarse - fine) > tol * abs(fine):
-                stack[top, 0] = m
-                stack[top, 1] = b
-                depth[top] = d + 1
-                top += 1
-                stack[top, 0] = a
-                stack[top, 1] = m
-                depth[top] = d + 1
-                top += 1
+                top = _push_halves(stack, depth, top, a, b, d)
                 continue
         n = n + 2
         for g in range(n):
@@ -524,15 +529,7 @@ def _integrate_cell(pnet, pn, onet, oa, ob, ia, ib, swapped, fk, fc, fplane, kin
                 lo_sum = _root_sum(pn, fk, fc, kinds, nf, x0, x1, no, GX, GW, ia, ib, icoef, rts, rfs)
                 hi_sum = _root_sum(pn, fk, fc, kinds, nf, x0, x1, no + 2, GX, GW, ia, ib, icoef, rts, rfs)
                 if abs(lo_sum - hi_sum) > tol_roots * (x1 - x0):
-                    xm = 0.5 * (x0 + x1)
-                    istack[itop, 0] = xm
-                    istack[itop, 1] = x1
-                    idepth[itop] = dd + 1
-                    itop += 1
-                    istack[itop, 0] = x0
-                    istack[itop, 1] = xm
-                    idepth[itop] = dd + 1
-                    itop += 1
+                    itop = _push_halves(istack, idepth, itop, x0, x1, dd)
                     continue
             no = no + 2
             for g in range(no):
