@@ -262,6 +262,18 @@ def _roots_at(pn, fk, fc, kinds, nf, sigma, ia, ib, coef, rts, rfs):
 
 
 @njit(cache=True)
+def _line_segments(pn, fk, fc, kinds, nf, sigma, ia, ib, icoef, rts, rfs, seg):
+    """Split the inner line ``sigma`` at the sorted roots of the graph functions: ``seg``
+    receives ``ia, roots..., ib``; returns the number of roots."""
+    n = _roots_at(pn, fk, fc, kinds, nf, sigma, ia, ib, icoef, rts, rfs)
+    seg[0] = ia
+    for r in range(n):
+        seg[r + 1] = rts[r]
+    seg[n + 1] = ib
+    return n
+
+
+@njit(cache=True)
 def _crossing(pn, ka, ca, kb, cb, lo, hi, ia, ib, coef):
     """Outer coordinate in ``[lo, hi]`` where the inner roots of two planes coincide (their
     difference changes sign between ``lo`` and ``hi``), by the Illinois method."""
@@ -535,11 +547,7 @@ def _integrate_cell(pnet, pn, onet, oa, ob, ia, ib, swapped, fk, fc, fplane, kin
             for g in range(no):
                 sigma = x0 + GX[no, g] * (x1 - x0)
                 wsig = GW[no, g] * (x1 - x0)
-                n = _roots_at(pn, fk, fc, kinds, nf, sigma, ia, ib, icoef, rts, rfs)
-                seg[0] = ia
-                for r in range(n):
-                    seg[r + 1] = rts[r]
-                seg[n + 1] = ib
+                n = _line_segments(pn, fk, fc, kinds, nf, sigma, ia, ib, icoef, rts, rfs, seg)
                 for sgi in range(n + 1):
                     t0 = seg[sgi]
                     t1 = seg[sgi + 1]
@@ -569,11 +577,7 @@ def _integrate_cell(pnet, pn, onet, oa, ob, ia, ib, swapped, fk, fc, fplane, kin
         if fk[f] != 0:
             continue
         sigma = vroot[v]
-        n = _roots_at(pn, fk, fc, kinds, nf, sigma, ia, ib, icoef, rts, rfs)
-        seg[0] = ia
-        for r in range(n):
-            seg[r + 1] = rts[r]
-        seg[n + 1] = ib
+        n = _line_segments(pn, fk, fc, kinds, nf, sigma, ia, ib, icoef, rts, rfs, seg)
         for sgi in range(n + 1):
             t0 = seg[sgi]
             t1 = seg[sgi + 1]
