@@ -130,12 +130,9 @@ def test_schema_is_valid_and_its_defaults_match_the_dataclasses() -> None:
     jsonschema.Draft202012Validator.check_schema(schema)
     solver = schema["$defs"]["solver"]["properties"]
     defaults = SolverOptions()
-    assert {k: v["default"] for k, v in solver.items()} == {
-        "newton_tol": defaults.newton_tol,
-        "max_newton": defaults.max_newton,
-        "outer_passes": defaults.outer_passes,
-        "linear": defaults.linear,
-    }
+    names = ("newton_tol", "max_newton", "outer_passes", "linear", "outer_tol", "max_cutbacks",
+             "kappa_dirichlet", "ghost_penalty")
+    assert {k: v["default"] for k, v in solver.items()} == {n: getattr(defaults, n) for n in names}
     assert schema["$defs"]["contactPair"]["properties"]["kappa"]["default"] == ContactPair.kappa
     assert tuple(schema["$defs"]["grid"]["properties"]["offset"]["default"]) == GridSpec.offset
     assert schema["properties"]["steps"]["default"] == 1

@@ -6,6 +6,11 @@ of each named patch (computed from the NURBS surfaces alone). With ``--level`` i
 every body in its grid of that level and prints the element counts and the volume and areas
 of the quadrature of the surface definition ``S``. Exit codes: 0 success, 2 bad input (one
 line on stderr naming the offending field, no traceback).
+
+``cgfem run CASE.yaml --level L --surface S --out DIR`` solves the case and writes
+``DIR/summary.json`` and ``DIR/step_NNN.vtu`` (:mod:`cgfem.run`), with a progress line per
+Newton iteration and per step on stderr. Exit codes: 0 converged, 1 failed to converge (the
+converged steps are written), 2 bad input.
 """
 
 from __future__ import annotations
@@ -142,6 +147,24 @@ def _cmd_check(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _cmd_run(args: argparse.Namespace) -> int:
+    import time
+
+    from cgfem.case.load import load_case
+    from cgfem.run import run_case
+
+    case = load_case(args.case)
+    start = time.perf_counter()
+
+    def log(message: str) -> None:
+        if not args.quiet:
+            print(f"[{time.perf_counter() - start:8.2f} s] {message}", file=sys.stderr, flush=True)
+
+    status = run_case(case, args.level, args.surface, args.out, log)
+    log(f"{status.status}: {status.summary}" + (f" ({status.message})" if status.message else ""))
+    return EXIT_OK if status.status == "converged" else EXIT_FAILED
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="cgfem", description="Contact mechanics in the Cartesian "
                                      "grid finite element method with exact NURBS geometry.")
@@ -157,6 +180,14 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--vtu", default=None, metavar="DIR",
                        help="write the grid and the quadrature points as VTU files to DIR")
     check.set_defaults(func=_cmd_check)
+    run = sub.add_parser("run", help="solve a case and write summary.json and step_NNN.vtu")
+    run.add_argument("case", help="case file (YAML)")
+    run.add_argument("--level", type=int, required=True, help="mesh level (h = h0 / 2^level)")
+    run.add_argument("--surface", choices=sorted(SURFACES), required=True,
+                     help="contact surface definition")
+    run.add_argument("--out", required=True, metavar="DIR", help="result folder")
+    run.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    run.set_defaults(func=_cmd_run)
     return parser
 
 

@@ -284,9 +284,10 @@ def _contact(i: int, raw: Mapping[str, Any], names: tuple[str, ...]) -> ContactP
 
 def _solver(raw: Mapping[str, Any]) -> SolverOptions:
     options: dict[str, Any] = dict(raw)
-    if "newton_tol" in options:
-        options["newton_tol"] = _number(options["newton_tol"], "solver.newton_tol")
-    for key in ("max_newton", "outer_passes"):
+    for key in ("newton_tol", "outer_tol", "kappa_dirichlet", "ghost_penalty"):
+        if key in options:
+            options[key] = _number(options[key], f"solver.{key}")
+    for key in ("max_newton", "outer_passes", "max_cutbacks"):
         if key in options:
             options[key] = int(options[key])  # the schema allows 30.0
     return _within("solver", SolverOptions, **options)

@@ -212,20 +212,34 @@ class ContactPair:
 
 @dataclass(frozen=True)
 class SolverOptions:
-    """Newton tolerance (relative residual), iteration limits and linear solver choice."""
+    """Newton tolerance (relative residual), iteration limits, linear solver choice, the
+    outer-loop tolerance on the recovered stress, the number of step cut-backs, and the
+    weak-Dirichlet (``kappa_dirichlet``) and ghost-penalty parameters."""
 
     newton_tol: float = 1e-9
     max_newton: int = 30
     outer_passes: int = 4
     linear: Literal["auto", "superlu", "pyamg", "pardiso"] = "auto"
+    outer_tol: float = 1e-6
+    max_cutbacks: int = 5
+    kappa_dirichlet: float = 10.0
+    ghost_penalty: float = 0.05
 
     def __post_init__(self) -> None:
-        tol = _finite("newton_tol", self.newton_tol)
-        if not tol > 0.0:
-            raise InputError("newton_tol", f"must be > 0, got {self.newton_tol!r}")
-        object.__setattr__(self, "newton_tol", tol)
+        for name in ("newton_tol", "outer_tol", "kappa_dirichlet"):
+            value = _finite(name, getattr(self, name))
+            if not value > 0.0:
+                raise InputError(name, f"must be > 0, got {getattr(self, name)!r}")
+            object.__setattr__(self, name, value)
+        gamma = _finite("ghost_penalty", self.ghost_penalty)
+        if gamma < 0.0:
+            raise InputError("ghost_penalty", f"must be >= 0, got {self.ghost_penalty!r}")
+        object.__setattr__(self, "ghost_penalty", gamma)
         _count("max_newton", self.max_newton)
         _count("outer_passes", self.outer_passes)
+        if isinstance(self.max_cutbacks, bool) or not isinstance(self.max_cutbacks, int) \
+                or self.max_cutbacks < 0:
+            raise InputError("max_cutbacks", f"must be an integer >= 0, got {self.max_cutbacks!r}")
         _one_of("linear", self.linear, LINEAR_SOLVERS)
 
 

@@ -1,0 +1,144 @@
+"""Numba kernels of the H8 element on an axis-aligned cube of size ``h``.
+
+Points are grouped by element (``offsets``) and given by local coordinates ``xi`` in
+``[-1, 1]^3``; dofs are ``3 * node + component``. Matrices are accumulated straight into
+the data array of a CSR matrix through ``scatter`` (n_elements, 576): the position of entry
+``(3a + i, 3b + k)`` of element ``e`` is ``scatter[e, 24 * (3a + i) + 3b + k]``. Kernels
+that scatter in parallel take elements of one colour (no shared nodes), so no two threads
+add to the same entry.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+_SIGNS = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
+                   [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=np.float64)
+
+
+@njit(cache=True)
+def basis(xi, h, N, dN):
+    """H8 shape functions ``N`` (8,) and physical gradients ``dN`` (8, 3) at ``xi`` (3,)."""
+    for a in range(8):
+        s0, s1, s2 = _SIGNS[a, 0], _SIGNS[a, 1], _SIGNS[a, 2]
+        f0 = 1.0 + s0 * xi[0]
+        f1 = 1.0 + s1 * xi[1]
+        f2 = 1.0 + s2 * xi[2]
+        N[a] = 0.125 * f0 * f1 * f2
+        scale = 0.25 / h  # (1/8) * (2/h)
+        dN[a, 0] = scale * s0 * f1 * f2
+        dN[a, 1] = scale * s1 * f0 * f2
+        dN[a, 2] = scale * s2 * f0 * f1
+
+
+@njit(cache=True, parallel=True)
+def point_gradients(connectivity, u, xi, offsets, h):
+    """Displacement gradient ``H[p, i, J] = du_i/dX_J`` (n, 3, 3) at every point."""
+    n_el = offsets.size - 1
+    H = np.zeros((xi.shape[0], 3, 3))
+    for e in prange(n_el):
+        N = np.empty(8)
+        dN = np.empty((8, 3))
+        for p in range(offsets[e], offsets[e + 1]):
+            basis(xi[p], h, N, dN)
+            for a in range(8):
+                base = 3 * connectivity[e, a]
+                for i in range(3):
+                    ua = u[base + i]
+                    for J in range(3):
+                        H[p, i, J] += ua * dN[a, J]
+    return H
+
+
+@njit(cache=True)
+def integrate_force(connectivity, P, xi, w, offsets, h, r):
+    """``r[3a+i] += sum_p w_p P[p, i, J] dN_a/dX_J`` (internal force)."""
+    N = np.empty(8)
+    dN = np.empty((8, 3))
+    for e in range(offsets.size - 1):
+        for p in range(offsets[e], offsets[e + 1]):
+            basis(xi[p], h, N, dN)
+            for a in range(8):
+                base = 3 * connectivity[e, a]
+                for i in range(3):
+                    r[base + i] += w[p] * (P[p, i, 0] * dN[a, 0] + P[p, i, 1] * dN[a, 1]
+                                           + P[p, i, 2] * dN[a, 2])
+
+
+@njit(cache=True, parallel=True)
+def integrate_tangent(A, constant, xi, w, offsets, h, elements, scatter, data):
+    """``K[3a+i, 3b+k] += sum_p w_p dN_a/dX_J A[p, i, J, k, L] dN_b/dX_L`` over the listed
+    elements (``A[0]`` at every point if ``constant``), accumulated into CSR ``data``. The elements run in parallel, so the listed
+    ones must share no node (one colour of :func:`cgfem.fem.assembly.colours`)."""
+    for q in prange(elements.size):
+        e = elements[q]
+        N = np.empty(8)
+        dN = np.empty((8, 3))
+        ke = np.zeros((24, 24))
+        T = np.empty((3, 3, 8, 3))  # T[i, J, b, k] = A[i, J, k, L] dN_b/dX_L
+        for p in range(offsets[e], offsets[e + 1]):
+            basis(xi[p], h, N, dN)
+            ap = p if constant == 0 else 0
+            for i in range(3):
+                for J in range(3):
+                    for b in range(8):
+                        for k in range(3):
+                            T[i, J, b, k] = w[p] * (A[ap, i, J, k, 0] * dN[b, 0]
+                                                    + A[ap, i, J, k, 1] * dN[b, 1]
+                                                    + A[ap, i, J, k, 2] * dN[b, 2])
+            for a in range(8):
+                for i in range(3):
+                    row = 3 * a + i
+                    for b in range(8):
+                        for k in range(3):
+                            ke[row, 3 * b + k] += (dN[a, 0] * T[i, 0, b, k] + dN[a, 1] * T[i, 1, b, k]
+                                                   + dN[a, 2] * T[i, 2, b, k])
+        for m in range(24):
+            for n in range(24):
+                data[scatter[e, 24 * m + n]] += ke[m, n]
+
+
+@njit(cache=True, parallel=True)
+def scatter_reference(ke, elements, scatter, data):
+    """Add one element matrix ``ke`` (24, 24) for each listed element (of one colour)."""
+    for q in prange(elements.size):
+        e = elements[q]
+        for m in range(24):
+            for n in range(24):
+                data[scatter[e, 24 * m + n]] += ke[m, n]
+
+
+@njit(cache=True)
+def integrate_mass(xi, w, offsets, h, components, elements, scatter, data):
+    """``K[3a+i, 3b+i] += sum_p w_p N_a N_b`` for the components ``i`` with
+    ``components[i]`` true (penalty of weak Dirichlet conditions)."""
+    N = np.empty(8)
+    dN = np.empty((8, 3))
+    for q in range(elements.size):
+        e = elements[q]
+        me = np.zeros((8, 8))
+        for p in range(offsets[e], offsets[e + 1]):
+            basis(xi[p], h, N, dN)
+            for a in range(8):
+                for b in range(8):
+                    me[a, b] += w[p] * N[a] * N[b]
+        for a in range(8):
+            for b in range(8):
+                for i in range(3):
+                    if components[i]:
+                        data[scatter[e, 24 * (3 * a + i) + 3 * b + i]] += me[a, b]
+
+
+@njit(cache=True)
+def integrate_load(connectivity, values, xi, w, offsets, h, r):
+    """``r[3a+i] += sum_p w_p N_a values[p, i]`` (tractions, body forces, multipliers)."""
+    N = np.empty(8)
+    dN = np.empty((8, 3))
+    for e in range(offsets.size - 1):
+        for p in range(offsets[e], offsets[e + 1]):
+            basis(xi[p], h, N, dN)
+            for a in range(8):
+                base = 3 * connectivity[e, a]
+                for i in range(3):
+                    r[base + i] += w[p] * N[a] * values[p, i]

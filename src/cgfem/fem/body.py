@@ -1,0 +1,141 @@
+"""One body of a case, discretized: its H8 space and every term acting on it.
+
+A :class:`BodyModel` sums its terms (bulk elasticity, ghost penalty, weak Dirichlet
+conditions, dead tractions and body forces) into a residual and a CSR tangent over its own
+dofs, for a load factor ``t`` and a frozen recovered stress (the outer-loop state). Bodies
+know nothing of each other; the solver stacks them (and, later, couples them by contact).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from cgfem.case.model import Body, Case, DisplacementBC, TractionBC
+from cgfem.embedding.quadrature import Embedding
+from cgfem.fem import spr
+from cgfem.fem._material_kernels import LINEAR_ELASTIC, NEO_HOOKEAN, cauchy_batch
+from cgfem.fem.assembly import Pattern, build_pattern
+from cgfem.fem.boundary import (BoundaryPoints, WeakDirichlet, body_force_load, surface_mask,
+                                traction_load)
+from cgfem.fem.elasticity import Elasticity
+from cgfem.fem.ghost import ghost_penalty
+from cgfem.fem.space import ElementPoints, Space
+
+
+@dataclass(frozen=True)
+class Discretization:
+    """Numerical parameters of the bulk and boundary terms.
+
+    kappa_dirichlet : weak-Dirichlet penalty ``beta = kappa E / h``
+    ghost_gamma : ghost-penalty parameter (0 switches it off)
+    finite : total Lagrangian finite strain (else small strain)
+    """
+
+    kappa_dirichlet: float = 10.0
+    ghost_gamma: float = 0.05
+    finite: bool = False
+
+
+@dataclass
+class BodyModel:
+    name: str
+    space: Space
+    embedding: Embedding
+    pattern: Pattern
+    elasticity: Elasticity
+    ghost: sp.csr_matrix
+    dirichlet: list[WeakDirichlet]
+    load: np.ndarray                 # (n_dofs,) dead loads at load factor 1
+    recovery: spr.Recovery
+    E: float
+    _ghost_pos: np.ndarray | None = field(default=None, repr=False)
+
+    @classmethod
+    def build(cls, body: Body, embedding: Embedding, boundary: list, options: Discretization) -> "BodyModel":
+        """The model of ``body`` on ``embedding`` with the case's ``boundary`` entries that
+        name it (each a :class:`DisplacementBC` or :class:`TractionBC`)."""
+        space = Space.from_embedding(embedding)
+        lam, mu = body.material.lame()
+        model = NEO_HOOKEAN if (options.finite and body.material.model == "neo_hookean") else LINEAR_ELASTIC
+        if options.finite and model == LINEAR_ELASTIC:
+            raise ValueError("finite strain needs neo_hookean materials")
+        G, extra = ghost_penalty(space, options.ghost_gamma, lam + 2.0 * mu)
+        pattern = build_pattern(space, extra)
+        volume = space.volume_points(embedding)
+        elasticity = Elasticity(space, pattern, volume, model, mu, lam)
+        E = body.material.E
+        beta = options.kappa_dirichlet * E / space.h
+        load = np.zeros(space.n_dofs)
+        if body.body_force is not None:
+            load += body_force_load(space, volume, body.body_force)
+        dirichlet = []
+        surface, names = embedding.surface, embedding.patch_names
+        for bc in boundary:
+            points = BoundaryPoints.of(space, surface, surface_mask(surface, names, bc.patches))
+            if isinstance(bc, DisplacementBC):
+                label = f"{body.name}/{'+'.join(bc.patches)}"
+                dirichlet.append(WeakDirichlet.build(label, space, pattern, points, bc.components, beta))
+            elif isinstance(bc, TractionBC):
+                load += traction_load(space, points, bc.value)
+        recovery = spr.build_recovery(space, embedding)
+        return cls(body.name, space, embedding, pattern, elasticity, G, dirichlet, load, recovery, E)
+
+    @property
+    def n_dofs(self) -> int:
+        return self.space.n_dofs
+
+    @property
+    def finite(self) -> bool:
+        return self.elasticity.model == NEO_HOOKEAN
+
+    def assemble(self, u: np.ndarray, t: float, stress: np.ndarray | None,
+                 tangent: bool = True) -> tuple[np.ndarray, sp.csr_matrix | None]:
+        """Residual ``r(u) = f_int - f_ext`` (n_dofs,) and, if asked, its tangent (CSR)."""
+        r = -t * self.load
+        data = self.pattern.zeros() if tangent else None
+        self.elasticity.add(u, r, data)
+        if self.ghost.nnz:
+            r += self.ghost @ u
+            if data is not None:
+                data[self._ghost_positions()] += self.ghost.data
+        for term in self.dirichlet:
+            term.add(u, t, stress, r, data)
+        return r, (self.pattern.matrix(data) if data is not None else None)
+
+    def _ghost_positions(self) -> np.ndarray:
+        if self._ghost_pos is None:
+            coo = self.ghost.tocoo()
+            self._ghost_pos = self.pattern.positions(coo.row, coo.col)
+            # tocoo keeps the CSR order, so positions line up with ghost.data
+        return self._ghost_pos
+
+    # -- recovered stress and outputs ------------------------------------------------------
+    def recover(self, u: np.ndarray) -> np.ndarray:
+        """Nodal recovered stress (n_nodes, 3, 3): SPR of ``P`` (Cauchy in small strain)."""
+        slots, xi = spr.sampling_points(self.space)
+        pts = _points(self.space, slots, xi)
+        return spr.recover(self.recovery, self.elasticity.stress(u, pts))
+
+    def reactions(self, u: np.ndarray, t: float, stress: np.ndarray | None) -> dict[str, np.ndarray]:
+        return {d.label: d.reaction(u, t, stress) for d in self.dirichlet}
+
+    def cauchy(self, u: np.ndarray, points: ElementPoints | None = None) -> np.ndarray:
+        """Cauchy stress (n, 3, 3) at ``points`` (default: the volume rule)."""
+        el = self.elasticity
+        return cauchy_batch(el.model, el.gradients(u, points), el.mu, el.lam)
+
+
+def _points(space: Space, slots: np.ndarray, xi: np.ndarray) -> ElementPoints:
+    """Points given by (slot, xi), grouped by element (must be sorted by slot)."""
+    counts = np.bincount(slots, minlength=space.n_elements)
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    x = space.centres()[slots] + 0.5 * space.h * xi
+    return ElementPoints(np.ascontiguousarray(xi), x, np.zeros(len(slots)), offsets)
+
+
+def boundary_of(case: Case, body: str) -> list:
+    """The boundary entries of ``case`` acting on ``body``, in file order."""
+    return [bc for bc in case.boundary if bc.body == body]

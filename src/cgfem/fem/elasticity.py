@@ -1,0 +1,112 @@
+"""Internal force and tangent of the elastic bulk over the cut-cell volume rule.
+
+Small strain (linear elastic) and finite strain (total Lagrangian, compressible Neo-Hookean)
+share one path: the displacement gradient ``H`` at the volume points, the constitutive kernel
+gives the stress ``P`` (Cauchy for small strain, first Piola-Kirchhoff for finite) and the
+tangent ``A = dP/dH``, and the element kernels integrate ``int P : grad v`` and
+``int grad v : A : grad du``. In the linear case the stiffness is computed once, and the
+inside elements of the uniform grid all get one reference matrix (their 2x2x2 Gauss rule
+is the same up to translation), so only cut elements are integrated point by point.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cgfem.fem import _element_kernels as kern
+from cgfem.fem._material_kernels import LINEAR_ELASTIC, stress_batch, tangent_batch
+from cgfem.fem.assembly import Pattern
+from cgfem.fem.space import ElementPoints, Space
+
+_GAUSS2 = np.stack(np.meshgrid(*[np.array([-1.0, 1.0]) / np.sqrt(3.0)] * 3, indexing="ij"),
+                   axis=-1).reshape(-1, 3)
+
+
+@dataclass
+class Elasticity:
+    """The bulk term of one body.
+
+    model : material kernel id (:data:`LINEAR_ELASTIC` or ``NEO_HOOKEAN``)
+    mu, lam : Lamé constants (Pa)
+    points : the volume rule grouped by active element
+    """
+
+    space: Space
+    pattern: Pattern
+    points: ElementPoints
+    model: int
+    mu: float
+    lam: float
+    _linear_data: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def linear(self) -> bool:
+        return self.model == LINEAR_ELASTIC
+
+    def gradients(self, u: np.ndarray, points: ElementPoints | None = None) -> np.ndarray:
+        """Displacement gradient (n, 3, 3) at ``points`` (default: the volume rule)."""
+        pts = self.points if points is None else points
+        return kern.point_gradients(self.space.connectivity, u, pts.xi, pts.offsets, self.space.h)
+
+    def stress(self, u: np.ndarray, points: ElementPoints | None = None) -> np.ndarray:
+        """Stress ``P`` (n, 3, 3) at ``points``: Cauchy (small strain) or first Piola-Kirchhoff."""
+        return stress_batch(self.model, self.gradients(u, points), self.mu, self.lam)[1]
+
+    def energy(self, u: np.ndarray) -> float:
+        """Strain energy (J); ``inf`` where a point is inverted (J <= 0)."""
+        W = stress_batch(self.model, self.gradients(u), self.mu, self.lam)[0]
+        return float(np.dot(W, self.points.w))
+
+    def add(self, u: np.ndarray, r: np.ndarray, data: np.ndarray | None) -> None:
+        """Add the internal force to ``r`` and, if ``data`` is given, the tangent to it."""
+        if self.linear:
+            K = self.pattern.matrix(self._stiffness())
+            r += K @ u
+            if data is not None:
+                data += self._linear_data
+            return
+        pts, h = self.points, self.space.h
+        H = self.gradients(u)
+        if data is None:
+            P = stress_batch(self.model, H, self.mu, self.lam)[1]
+        else:
+            _, P, A = tangent_batch(self.model, H, self.mu, self.lam)
+            for elements in self.pattern.colours:
+                kern.integrate_tangent(A, 0, pts.xi, pts.w, pts.offsets, h, elements,
+                                       self.pattern.scatter, data)
+        kern.integrate_force(self.space.connectivity, P, pts.xi, pts.w, pts.offsets, h, r)
+
+    def _stiffness(self) -> np.ndarray:
+        if self._linear_data is None:
+            self._linear_data = self.linear_stiffness_data()
+        return self._linear_data
+
+    def linear_stiffness_data(self) -> np.ndarray:
+        """CSR data of the small-strain stiffness: one reference matrix for every inside
+        element, the volume rule for cut ones."""
+        space, pts, pat, h = self.space, self.points, self.pattern, self.space.h
+        data = pat.zeros()
+        zero = np.zeros((1, 3, 3))
+        A = tangent_batch(self.model, zero, self.mu, self.lam)[2]
+        ke = reference_matrix(A[0], h)
+        cut = np.zeros(space.n_elements, bool)
+        cut[space.cut] = True
+        for elements in pat.colours:
+            inner = elements[~cut[elements]]
+            kern.scatter_reference(ke, inner, pat.scatter, data)
+            kern.integrate_tangent(A, 1, pts.xi, pts.w, pts.offsets, h, elements[cut[elements]],
+                                   pat.scatter, data)
+        return data
+
+
+def reference_matrix(A: np.ndarray, h: float) -> np.ndarray:
+    """Stiffness (24, 24) of a whole cube of size ``h`` with the constant tangent ``A``
+    (3, 3, 3, 3), by 2x2x2 Gauss (exact for H8)."""
+    w = np.full(8, (0.5 * h) ** 3)
+    offsets = np.array([0, 8], np.int64)
+    scatter = np.arange(576, dtype=np.int64).reshape(1, 576)
+    data = np.zeros(576)
+    kern.integrate_tangent(A[None], 1, _GAUSS2, w, offsets, h, np.array([0], np.int64), scatter, data)
+    return data.reshape(24, 24)

@@ -1,0 +1,97 @@
+"""Ghost penalty: the remedy of this code for small cut cells.
+
+An element cut so that only a sliver of it is material gives its nodes almost no stiffness:
+the matrix becomes arbitrarily ill-conditioned as the sliver shrinks, iterative solvers stall
+and direct ones lose digits. Following Burman's ghost penalty, we add on every grid face
+shared by two active elements of which at least one is cut
+
+    j(u, v) = gamma * M * h * int_F [du/dn] . [dv/dn] dF,
+
+with ``[du/dn]`` the jump of the normal derivative of the displacement across the face and
+``M = lambda + 2 mu`` the P-wave modulus. For trilinear elements the normal derivative is
+the only discontinuous part of the gradient and the second normal derivative vanishes, so
+this one term ties a sliver's nodes to the well-supported element next to it. It is zero
+for every linear displacement field (the patch test stays exact) and of order ``h`` for a
+smooth solution, so the optimal rate in the energy norm is kept. The term is linear in ``u``
+and is also used, unchanged, in finite strain (it acts on the displacement field, not on
+the stress). Effect measured in ``tests/test_ghost.py`` and in the issue note.
+
+On a uniform grid the face matrix is one (16, 16) scalar matrix per axis, computed once.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from cgfem.fem.space import NODE_XI, Space
+
+#: default ghost-penalty parameter gamma
+DEFAULT_GAMMA = 0.05
+
+
+def face_pairs(space: Space) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs of active elements sharing a face with at least one of them cut.
+
+    Returns ``(pairs (m, 2), axis (m,))``: compact element numbers, the first one on the
+    lower side of the face along ``axis``.
+    """
+    grid = space.grid
+    ijk = grid.element_ijk(space.elements)
+    pairs, axes = [], []
+    for axis in range(3):
+        step = np.zeros(3, np.int64)
+        step[axis] = 1
+        upper = ijk + step
+        inside = upper[:, axis] < grid.shape[axis]
+        lower_slot = np.flatnonzero(inside)
+        upper_slot = space.slot(grid.element_id(upper[inside]))
+        keep = upper_slot >= 0
+        lower_slot, upper_slot = lower_slot[keep], upper_slot[keep]
+        keep = space.cut[lower_slot] | space.cut[upper_slot]
+        pairs.append(np.stack([lower_slot[keep], upper_slot[keep]], axis=1))
+        axes.append(np.full(int(keep.sum()), axis))
+    return np.concatenate(pairs).astype(np.int64), np.concatenate(axes)
+
+
+def face_matrix(axis: int, h: float) -> np.ndarray:
+    """``int_F [dN/dn] [dN/dn] dF`` (16, 16) for the face between a lower and an upper
+    element along ``axis`` (nodes of the lower element first), by 2x2 Gauss (exact)."""
+    g = np.array([-1.0, 1.0]) / np.sqrt(3.0)
+    others = [a for a in range(3) if a != axis]
+    m = np.zeros((16, 16))
+    for s in g:
+        for t in g:
+            jump = np.empty(16)
+            for side, xi_n in ((0, 1.0), (1, -1.0)):
+                xi = np.zeros(3)
+                xi[axis] = xi_n
+                xi[others[0]], xi[others[1]] = s, t
+                f = 1.0 + NODE_XI * xi                     # (8, 3)
+                d = NODE_XI[:, axis] * np.prod(np.delete(f, axis, axis=1), axis=1) / 8.0 * (2.0 / h)
+                jump[8 * side:8 * side + 8] = d if side == 1 else -d
+            m += np.outer(jump, jump) * (0.5 * h) ** 2
+    return m
+
+
+def ghost_penalty(space: Space, gamma: float, modulus: float) -> tuple[sp.csr_matrix, np.ndarray]:
+    """The ghost-penalty matrix (n_dofs, n_dofs) and the node pairs (m, 2) it couples
+    beyond the elements (to be added to the sparsity pattern)."""
+    pairs, axes = face_pairs(space)
+    n = space.n_dofs
+    if pairs.size == 0 or gamma == 0.0:
+        return sp.csr_matrix((n, n)), np.zeros((0, 2), np.int64)
+    scale = gamma * modulus * space.h
+    nodes = np.concatenate([space.connectivity[pairs[:, 0]], space.connectivity[pairs[:, 1]]], axis=1)
+    mats = np.stack([face_matrix(a, space.h) for a in range(3)])[axes] * scale   # (m, 16, 16)
+    rows = np.broadcast_to(nodes[:, :, None], mats.shape)
+    cols = np.broadcast_to(nodes[:, None, :], mats.shape)
+    blocks = []
+    for i in range(3):
+        blocks.append(sp.coo_matrix((mats.ravel(), (3 * rows.ravel() + i, 3 * cols.ravel() + i)),
+                                    shape=(n, n)))
+    G = sum(blocks).tocsr()
+    G.sum_duplicates()
+    nn = space.n_nodes
+    keys = np.unique((nodes[:, :, None] * nn + nodes[:, None, :]).ravel())
+    return G, np.stack([keys // nn, keys % nn], axis=1)

@@ -1,0 +1,147 @@
+"""The trilinear (H8) displacement field of one body on its active grid elements.
+
+Active elements (inside and cut) and their nodes get compact numbers; the displacement has
+three components per active node, interleaved: dof ``3 * node + component``. Quadrature
+points of the embedding are regrouped per active element (:class:`ElementPoints`) and carry
+their local coordinates ``xi = (x - x_c) / (h / 2)`` in ``[-1, 1]^3`` (points of a
+moment-fitted rule may lie anywhere in the cube), which is all the element kernels need:
+on an axis-aligned cube ``dN/dx = (2 / h) dN/dxi``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cgfem.embedding.grid import CartesianGrid
+from cgfem.embedding.quadrature import CUT, Embedding
+
+#: local coordinates of the 8 H8 nodes, in the grid's node order
+NODE_XI = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
+                    [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=float)
+
+
+@dataclass(frozen=True)
+class ElementPoints:
+    """Quadrature points grouped by active element.
+
+    xi : (n, 3) local coordinates in the element's cube
+    x : (n, 3) physical coordinates
+    w : (n,) weights
+    offsets : (n_elements + 1,) points of element ``e`` are ``offsets[e]:offsets[e+1]``
+    """
+
+    xi: np.ndarray
+    x: np.ndarray
+    w: np.ndarray
+    offsets: np.ndarray
+
+    @property
+    def element(self) -> np.ndarray:
+        """(n,) active element of every point."""
+        return np.repeat(np.arange(self.offsets.size - 1), np.diff(self.offsets))
+
+    def select(self, elements: np.ndarray) -> "ElementPoints":
+        """The points of the listed active elements only (the others keep empty ranges)."""
+        keep = np.zeros(self.offsets.size - 1, bool)
+        keep[elements] = True
+        mask = keep[self.element]
+        counts = np.where(keep, np.diff(self.offsets), 0)
+        return ElementPoints(self.xi[mask], self.x[mask], self.w[mask],
+                             np.concatenate([[0], np.cumsum(counts)]).astype(np.int64))
+
+
+@dataclass(frozen=True)
+class Space:
+    """H8 field over the active elements of a grid.
+
+    elements : (n_elements,) grid ids of the active elements, ascending
+    nodes : (n_nodes,) grid ids of their nodes, ascending
+    connectivity : (n_elements, 8) compact node numbers, H8 order
+    coordinates : (n_nodes, 3) node positions
+    cut : (n_elements,) bool, element cut by the boundary
+    """
+
+    grid: CartesianGrid
+    elements: np.ndarray
+    nodes: np.ndarray
+    connectivity: np.ndarray
+    coordinates: np.ndarray
+    cut: np.ndarray
+
+    @classmethod
+    def from_embedding(cls, embedding: Embedding) -> "Space":
+        grid = embedding.grid
+        elements = embedding.active_elements
+        grid_nodes = grid.element_nodes(elements)
+        nodes, connectivity = np.unique(grid_nodes, return_inverse=True)
+        connectivity = connectivity.reshape(-1, 8).astype(np.int64)
+        ny, nz = grid.node_shape[1], grid.node_shape[2]
+        ijk = np.stack([nodes // (ny * nz), (nodes // nz) % ny, nodes % nz], axis=-1)
+        return cls(grid, elements, nodes, connectivity, grid.node_coordinates(ijk),
+                   embedding.status[elements] == CUT)
+
+    @property
+    def n_elements(self) -> int:
+        return int(self.elements.size)
+
+    @property
+    def n_nodes(self) -> int:
+        return int(self.nodes.size)
+
+    @property
+    def n_dofs(self) -> int:
+        return 3 * self.n_nodes
+
+    @property
+    def h(self) -> float:
+        return self.grid.h
+
+    @property
+    def element_dofs(self) -> np.ndarray:
+        """(n_elements, 24) dofs of every element, node-major: ``3 * node + component``."""
+        return (3 * self.connectivity[:, :, None] + np.arange(3)).reshape(-1, 24)
+
+    def slot(self, grid_elements: np.ndarray) -> np.ndarray:
+        """Compact numbers of grid elements (-1 for an inactive one)."""
+        grid_elements = np.asarray(grid_elements, np.int64)
+        pos = np.searchsorted(self.elements, grid_elements)
+        pos = np.minimum(pos, max(self.n_elements - 1, 0))
+        return np.where(self.elements[pos] == grid_elements, pos, -1)
+
+    def centres(self) -> np.ndarray:
+        """(n_elements, 3) element centres."""
+        return self.grid.element_center(self.grid.element_ijk(self.elements))
+
+    def local(self, x: np.ndarray, slots: np.ndarray) -> np.ndarray:
+        """Local coordinates (n, 3) of points ``x`` in active elements ``slots``."""
+        return (np.asarray(x, float) - self.centres()[slots]) / (0.5 * self.h)
+
+    def group(self, x: np.ndarray, w: np.ndarray, grid_elements: np.ndarray) -> ElementPoints:
+        """Regroup points (x, w, owning grid element) by active element; points of inactive
+        elements are an error (the embedding's rules only hold active elements)."""
+        slots = self.slot(grid_elements)
+        if np.any(slots < 0):
+            raise ValueError("quadrature points in inactive elements")
+        order = np.argsort(slots, kind="stable")
+        slots = slots[order]
+        x = np.asarray(x, float)[order]
+        counts = np.bincount(slots, minlength=self.n_elements)
+        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        return ElementPoints(self.local(x, slots), x, np.asarray(w, float)[order], offsets)
+
+    def volume_points(self, embedding: Embedding) -> ElementPoints:
+        rule = embedding.volume
+        return self.group(rule.x, rule.w, rule.element)
+
+    def shape_values(self, xi: np.ndarray) -> np.ndarray:
+        """H8 shape functions (n, 8) at local coordinates ``xi`` (n, 3)."""
+        xi = np.asarray(xi, float)
+        return np.prod(1.0 + xi[:, None, :] * NODE_XI[None, :, :], axis=2) / 8.0
+
+    def interpolate(self, nodal: np.ndarray, slots: np.ndarray, xi: np.ndarray) -> np.ndarray:
+        """Values at points of a nodal field ``nodal`` (n_nodes, ...)."""
+        n = self.shape_values(xi)
+        values = nodal[self.connectivity[slots]]
+        return np.einsum("pa,pa...->p...", n, values)

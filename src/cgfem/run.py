@@ -1,0 +1,184 @@
+"""``cgfem run``: a case from its file to its result folder.
+
+case -> geometry -> embedding (per body) -> body models -> static solver -> summary.json and
+step_NNN.vtu. Progress goes to ``log`` (stderr on the command line), one line per Newton
+iteration and per step. Before any grid is built, the memory the run will need is
+estimated from the B-rep volume and area and refused if the machine does not have it.
+"""
+
+from __future__ import annotations
+
+import platform
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from cgfem import __version__
+from cgfem.case.model import Case
+from cgfem.embedding.quadrature import embed, grid_for
+from cgfem.errors import InputError
+from cgfem.fem.body import BodyModel, Discretization, boundary_of
+from cgfem.fem.materials import von_mises
+from cgfem.fem.spr import energy_norm, zz_estimate
+from cgfem.geometry.builders import build_solid
+from cgfem.geometry.measure import areas_by_name, volume
+from cgfem.results import clear_previous, write_json_atomic, write_step
+from cgfem.solve.static import StaticOptions, StepRecord, System, solve_static
+
+#: surface definition -> quadrature of the embedding
+SURFACES = {"facets": "facets", "nurbs_fe": "nurbs", "nurbs_fit": "nurbs"}
+
+#: bytes per active element and per cut element (measured on the chain link, rounded up:
+#: pattern scatter map, volume points, tangent data, factorization fill)
+BYTES_PER_ELEMENT = 60_000
+BYTES_PER_CUT_ELEMENT = 120_000
+
+
+@dataclass(frozen=True)
+class RunStatus:
+    status: str            # converged | failed
+    summary: Path
+    message: str = ""
+
+
+def available_memory() -> int:
+    """Bytes of memory available to a new process (``MemAvailable``), or 16 GiB if unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 16 * 2**30
+
+
+def estimate_memory(case: Case, level: int, solids: dict) -> tuple[int, int]:
+    """Estimated bytes and DOFs of ``case`` at ``level`` from the B-rep measures: inside
+    elements ~ V / h^3, cut elements ~ 2 A / h^2."""
+    total, dofs = 0, 0
+    for body in case.bodies:
+        h = body.grid.h(level)
+        v, a = volume(solids[body.name]), sum(areas_by_name(solids[body.name]).values())
+        inside, cut = v / h**3, 2.0 * a / h**2
+        total += int(BYTES_PER_ELEMENT * inside + BYTES_PER_CUT_ELEMENT * cut)
+        dofs += int(3 * (inside + cut))
+    return total, dofs
+
+
+def check_memory(case: Case, level: int, solids: dict, available: int | None = None) -> None:
+    need, dofs = estimate_memory(case, level, solids)
+    have = available_memory() if available is None else available
+    if need > have:
+        raise InputError("--level", f"level {level} needs about {need / 2**30:.1f} GiB "
+                         f"(~{dofs:,} DOFs), but only {have / 2**30:.1f} GiB are available")
+
+
+def discretization_of(case: Case) -> Discretization:
+    s = case.solver
+    return Discretization(kappa_dirichlet=s.kappa_dirichlet, ghost_gamma=s.ghost_penalty,
+                          finite=case.kinematics == "finite")
+
+
+def static_options(case: Case) -> StaticOptions:
+    s = case.solver
+    return StaticOptions(newton_tol=s.newton_tol, max_newton=s.max_newton, outer_passes=s.outer_passes,
+                         outer_tol=s.outer_tol, max_cutbacks=s.max_cutbacks, linear=s.linear)
+
+
+def build_models(case: Case, level: int, surface: str, log: Callable[[str], None]) -> tuple[list, dict]:
+    """Embed and discretize every body; returns the models and per-body measures."""
+    if case.contact:
+        raise InputError("contact", "contact pairs are not implemented yet in `cgfem run`")
+    solids = {b.name: build_solid(b.geometry) for b in case.bodies}
+    check_memory(case, level, solids)
+    options = discretization_of(case)
+    models, measures = [], {}
+    for body in case.bodies:
+        tic = time.perf_counter()
+        solid = solids[body.name]
+        emb = embed(solid, grid_for(solid, body.grid.h0, level, body.grid.offset), SURFACES[surface])
+        model = BodyModel.build(body, emb, boundary_of(case, body.name), options)
+        models.append(model)
+        measures[body.name] = {
+            "nodes": model.space.n_nodes, "dofs": model.n_dofs,
+            "elements": {k: v for k, v in emb.counts().items() if k in ("inside", "cut")},
+            "h": model.space.h,
+            "volume": float(emb.volume.w.sum()), "area": float(emb.surface.w.sum()),
+            "brep_volume": volume(solid), "brep_area": float(sum(areas_by_name(solid).values()))}
+        log(f"body {body.name}: {model.space.n_nodes} nodes, {model.n_dofs} dofs, "
+            f"{int(model.space.cut.sum())} cut elements ({time.perf_counter() - tic:.2f} s)")
+    return models, measures
+
+
+def step_outputs(model: BodyModel, u: np.ndarray, stress: np.ndarray) -> dict:
+    """Nodal fields for the VTU file and scalars for the summary of one body at one step."""
+    from cgfem.fem import spr
+
+    space, el = model.space, model.elasticity
+    slots, xi = spr.sampling_points(space)
+    from cgfem.fem.body import _points
+    nodal_cauchy = spr.recover(model.recovery, model.cauchy(u, _points(space, slots, xi)))
+    vm_nodes = von_mises(nodal_cauchy)
+    vol = el.points
+    sigma_h = model.cauchy(u)
+    at_points = spr.recovered_at(space, nodal_cauchy, vol.element, vol.xi)
+    vm_points = von_mises(at_points)
+    inside = vol.w > 0.0
+    per_element = np.zeros(space.n_elements)
+    np.maximum.at(per_element, vol.element[inside], vm_points[inside])
+    eta, _ = zz_estimate(space, vol, sigma_h, at_points, el.mu, el.lam)
+    norm = energy_norm(vol, sigma_h, el.mu, el.lam)
+    status = np.where(space.cut, 2, 1)
+    return {"grid": space.grid, "elements": space.elements, "displacement": u.reshape(-1, 3),
+            "stress": nodal_cauchy, "von_mises": vm_nodes, "status": status,
+            "element_von_mises": per_element, "max_von_mises": float(vm_points[inside].max(initial=0.0)),
+            "error_estimate": float(eta), "energy_norm": float(norm)}
+
+
+def run_case(case: Case, level: int, surface: str, out: Path,
+             log: Callable[[str], None] = lambda m: None) -> RunStatus:
+    """Solve ``case`` and write its results to ``out``; returns the run status."""
+    if level < 0:
+        raise InputError("--level", f"must be >= 0, got {level}")
+    if surface not in SURFACES:
+        raise InputError("--surface", f"must be one of {', '.join(SURFACES)}, got {surface!r}")
+    started = time.perf_counter()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    clear_previous(out)
+    models, measures = build_models(case, level, surface, log)
+    built = time.perf_counter()
+    system = System(models)
+    steps: list[dict] = []
+
+    def on_step(record: StepRecord) -> None:
+        outputs = [step_outputs(m, u, s) for m, u, s in zip(models, record.u, record.stress)]
+        write_step(out, len(steps) + 1, outputs)
+        reactions = {}
+        for m, u, s in zip(models, record.u, record.stress):
+            reactions.update({k: v.tolist() for k, v in m.reactions(u, record.load_factor, s).items()})
+        steps.append({"load_factor": record.load_factor, "newton_residuals": record.newton_residuals[0],
+                      "pass_residuals": record.newton_residuals,
+                      "outer_passes": record.outer_passes, "outer_changes": record.outer_changes,
+                      "reactions": reactions,
+                      "contact": {"force": [0.0, 0.0, 0.0], "active_points": 0, "max_pressure": 0.0},
+                      "max_von_mises": {m.name: o["max_von_mises"] for m, o in zip(models, outputs)},
+                      "error_estimate": {m.name: o["error_estimate"] for m, o in zip(models, outputs)},
+                      "energy_norm": {m.name: o["energy_norm"] for m, o in zip(models, outputs)},
+                      "seconds": record.seconds})
+        log(f"step {len(steps)} converged at load factor {record.load_factor:.4g} "
+            f"({record.outer_passes} outer passes, {record.seconds:.2f} s)")
+
+    result = solve_static(system, case.steps, static_options(case), log, on_step)
+    summary = {"case": case.name, "level": level, "surface": surface, "status": result.status,
+               "message": result.message, "kinematics": case.kinematics, "bodies": measures,
+               "steps": steps,
+               "timings": {"build_s": built - started, "solve_s": time.perf_counter() - built},
+               "versions": {"cgfem": __version__, "python": platform.python_version(),
+                            "numpy": np.__version__}}
+    path = write_json_atomic(out / "summary.json", summary)
+    return RunStatus(result.status, path, result.message)

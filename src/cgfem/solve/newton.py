@@ -1,0 +1,102 @@
+"""Newton-Raphson with a backtracking line search, every stage passed in as a function.
+
+``assemble(u, tangent) -> (r, K)`` gives the residual and (if asked) the tangent;
+``solve(K, r) -> du`` solves ``K du = -r`` (or raises); ``log(iteration, residual)``
+reports progress. The line search halves the step while the residual norm does not
+decrease enough (Armijo on ``|r|^2 / 2``) or the trial state is inadmissible (a NaN
+residual: an inverted element); close to the solution it takes the full Newton step, so
+the quadratic convergence is kept.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+#: Armijo constant and the smallest step fraction tried by the line search
+ARMIJO = 1e-4
+MIN_STEP = 1.0 / 64.0
+
+
+@dataclass
+class NewtonResult:
+    """Outcome of one Newton solve.
+
+    residuals : residual norms, the first at the initial guess
+    reason : why it stopped ("converged", "max_iterations", "line_search", "nan", "linear_solver")
+    """
+
+    u: np.ndarray
+    converged: bool
+    residuals: list[float] = field(default_factory=list)
+    reason: str = ""
+
+    @property
+    def iterations(self) -> int:
+        return max(len(self.residuals) - 1, 0)
+
+
+def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0: np.ndarray,
+           solve: Callable[[object, np.ndarray], np.ndarray], *, tol: float, reference: float,
+           max_iter: int, log: Callable[[int, float], None] | None = None) -> NewtonResult:
+    """Solve ``r(u) = 0`` from ``u0`` until ``|r| <= tol * reference``."""
+    u = u0.copy()
+    r, K = assemble(u, True)
+    norm = float(np.linalg.norm(r))
+    result = NewtonResult(u, False, [norm])
+    if log:
+        log(0, norm)
+    if not np.isfinite(norm):
+        result.reason = "nan"
+        return result
+    for it in range(1, max_iter + 1):
+        if norm <= tol * reference:
+            result.converged, result.reason = True, "converged"
+            break
+        try:
+            du = solve(K, -r)
+        except (RuntimeError, ValueError) as err:
+            result.reason = f"linear_solver: {err}"
+            return result
+        step, trial = 1.0, None
+        while step >= MIN_STEP:
+            candidate = u + step * du
+            # the full step usually succeeds: assemble its tangent at once
+            r_new, K_new = assemble(candidate, step == 1.0)
+            n_new = float(np.linalg.norm(r_new))
+            if np.isfinite(n_new) and n_new ** 2 <= (1.0 - 2.0 * ARMIJO * step) * norm ** 2:
+                trial = candidate
+                break
+            step *= 0.5
+        if trial is None:
+            result.reason = "line_search"
+            return result
+        u, r, norm = trial, r_new, n_new
+        K = K_new if K_new is not None else assemble(u, True)[1]
+        result.u = u
+        result.residuals.append(norm)
+        if log:
+            log(it, norm)
+        if not np.isfinite(norm):
+            result.reason = "nan"
+            return result
+    else:
+        if norm <= tol * reference:
+            result.converged, result.reason = True, "converged"
+        else:
+            result.reason = "max_iterations"
+    result.u = u
+    return result
+
+
+def observed_order(residuals: list[float], floor: float = 1e-13) -> float:
+    """Convergence order ``q`` of ``r_{k+1} ~ C r_k^q`` from the last three residuals above
+    round-off (``floor`` times the first one): ``log(r3/r2) / log(r2/r1)``."""
+    r = np.asarray(residuals, float)
+    r = r[r > floor * r[0]] if r.size else r
+    if r.size < 3:
+        return float("nan")
+    r1, r2, r3 = r[-3:]
+    return float(np.log(r3 / r2) / np.log(r2 / r1))
