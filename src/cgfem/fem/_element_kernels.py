@@ -142,3 +142,20 @@ def integrate_load(connectivity, values, xi, w, offsets, h, r):
                 base = 3 * connectivity[e, a]
                 for i in range(3):
                     r[base + i] += w[p] * N[a] * values[p, i]
+
+
+@njit(cache=True, parallel=True)
+def point_values(connectivity, nodal, xi, offsets, h):
+    """Values (n, k) at the points of a nodal field ``nodal`` (n_nodes, k)."""
+    k = nodal.shape[1]
+    out = np.zeros((xi.shape[0], k))
+    for e in prange(offsets.size - 1):
+        N = np.empty(8)
+        dN = np.empty((8, 3))
+        for p in range(offsets[e], offsets[e + 1]):
+            basis(xi[p], h, N, dN)
+            for a in range(8):
+                node = connectivity[e, a]
+                for c in range(k):
+                    out[p, c] += N[a] * nodal[node, c]
+    return out

@@ -33,13 +33,11 @@ class BoundaryPoints:
     points : positions, weights and local coordinates, grouped
     normal : (n, 3) outward unit normals (reference configuration)
     slots : (n,) active element of each point
-    shape : (n, 8) H8 shape functions at the points
     """
 
     points: ElementPoints
     normal: np.ndarray
     slots: np.ndarray
-    shape: np.ndarray
 
     @classmethod
     def of(cls, space: Space, surface: SurfaceQuadrature, mask: np.ndarray) -> "BoundaryPoints":
@@ -53,21 +51,29 @@ class BoundaryPoints:
         offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         xi = space.local(x, slots)
         pts = ElementPoints(xi, x, surface.w[mask][order], offsets)
-        return cls(pts, surface.normal[mask][order], slots, space.shape_values(xi))
+        return cls(pts, surface.normal[mask][order], slots)
 
     @property
     def area(self) -> float:
         return float(self.points.w.sum())
 
+    def interpolate(self, space: Space, nodal: np.ndarray) -> np.ndarray:
+        """Values (n, ...) at the points of a nodal field (n_nodes, ...)."""
+        nodal = np.asarray(nodal, float)
+        flat = np.ascontiguousarray(nodal.reshape(nodal.shape[0], -1))
+        p = self.points
+        out = kern.point_values(space.connectivity, flat, p.xi, p.offsets, space.h)
+        return out.reshape((-1,) + nodal.shape[1:])
+
     def values(self, space: Space, u: np.ndarray) -> np.ndarray:
         """Displacement (n, 3) at the points."""
-        nodal = u.reshape(-1, 3)[space.connectivity[self.slots]]        # (n, 8, 3)
-        return np.einsum("pa,pai->pi", self.shape, nodal)
+        return self.interpolate(space, u.reshape(-1, 3))
 
     def traction_of(self, space: Space, nodal_stress: np.ndarray) -> np.ndarray:
         """``sigma* . n`` (n, 3) of a nodal stress field (n_nodes, 3, 3)."""
-        s = np.einsum("pa,paij->pij", self.shape, nodal_stress[space.connectivity[self.slots]])
-        return np.einsum("pij,pj->pi", s, self.normal)
+        s = self.interpolate(space, nodal_stress)
+        n = self.normal
+        return s[:, :, 0] * n[:, 0:1] + s[:, :, 1] * n[:, 1:2] + s[:, :, 2] * n[:, 2:3]
 
     def integrate(self, space: Space, values: np.ndarray, r: np.ndarray) -> None:
         """``r += int N_a values_i dA``."""

@@ -1,0 +1,121 @@
+"""``cgfem run``: result files, exit codes, progress, memory guard."""
+
+from __future__ import annotations
+
+import json
+import textwrap
+
+import meshio
+import numpy as np
+import pytest
+
+from cgfem.cli import main
+
+LINK = textwrap.dedent("""\
+    name: link_pull
+    kinematics: finite
+    steps: 2
+    bodies:
+      link:
+        geometry: {builder: half_torus, center: [0, 0, 0], axis: [0, 0, 1], major_radius: 0.02,
+                   minor_radius: 0.005, keep: [0, 1, 0]}
+        material: {model: neo_hookean, E: 7.0e6, nu: 0.45}
+        grid: {h0: 0.005, offset: [0.13, 0.29, 0.41]}
+    boundary:
+      - {body: link, patches: [cap_a], type: displacement, components: {x: 0, y: 0, z: 0}}
+      - {body: link, patches: [cap_b], type: displacement, components: {x: 0, y: -0.002, z: 0}}
+    solver: {outer_passes: 6}
+    """)
+
+CRUSH = textwrap.dedent("""\
+    name: crush
+    kinematics: finite
+    steps: 4
+    bodies:
+      b:
+        geometry: {builder: box, min: [0, 0, 0], max: [1, 1, 1]}
+        material: {model: neo_hookean, E: 1.0e6, nu: 0.3}
+        grid: {h0: 0.5, offset: [0.13, 0.29, 0.41]}
+    boundary:
+      - {body: b, patches: [xmin], type: displacement, components: {x: 0, y: 0, z: 0}}
+      - {body: b, patches: [xmax], type: displacement, components: {x: -1.2, y: 0.3, z: 0}}
+    solver: {max_newton: 8, max_cutbacks: 2}
+    """)
+
+
+def _write(tmp_path, text, name="case.yaml"):
+    path = tmp_path / name
+    path.write_text(text)
+    return str(path)
+
+
+def test_run_writes_summary_and_steps(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "summary.json").write_text("{}")          # a stale result must not survive
+    (out / "step_007.vtu").write_text("stale")
+    code = main(["run", _write(tmp_path, LINK), "--level", "0", "--surface", "nurbs_fe", "--out", str(out)])
+    assert code == 0
+    err = capsys.readouterr().err
+    assert "newton" in err and "step 2 converged" in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "converged"
+    assert (summary["case"], summary["level"], summary["surface"]) == ("link_pull", 0, "nurbs_fe")
+    body = summary["bodies"]["link"]
+    assert body["dofs"] == 3 * body["nodes"]
+    assert abs(body["volume"] / body["brep_volume"] - 1) < 1e-8
+    assert [s["load_factor"] for s in summary["steps"]] == [0.5, 1.0]
+    last = summary["steps"][-1]
+    assert list(last["reactions"]) == ["link/cap_a", "link/cap_b"]
+    # no other load: the two supports balance, and the pulled cap is pulled towards -y
+    ra, rb = (np.array(last["reactions"][k]) for k in ("link/cap_a", "link/cap_b"))
+    assert np.linalg.norm(ra + rb) < 1e-3 * np.linalg.norm(ra)
+    assert rb[1] < 0 < ra[1]
+    assert last["max_von_mises"]["link"] > 0 and last["newton_residuals"][-1] < last["newton_residuals"][0]
+    assert sorted(p.name for p in out.iterdir()) == ["step_001.vtu", "step_002.vtu", "summary.json"]
+    mesh = meshio.read(out / "step_002.vtu")
+    assert mesh.points.shape[0] == body["nodes"]
+    assert {"displacement", "stress", "von_mises"} <= set(mesh.point_data)
+    assert {"status", "element_von_mises"} <= set(mesh.cell_data)
+    assert mesh.point_data["displacement"].shape == (body["nodes"], 3)
+
+
+def test_run_that_fails_keeps_converged_steps_and_exits_1(tmp_path, capsys):
+    out = tmp_path / "out"
+    code = main(["run", _write(tmp_path, CRUSH), "--level", "0", "--surface", "facets", "--out", str(out),
+                 "--quiet"])
+    assert code == 1
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "failed" and "cut-backs" in summary["message"]
+    steps = summary["steps"]
+    assert 1 <= len(steps) < 4 and all(s["load_factor"] < 1.0 for s in steps)
+    assert sorted(p.name for p in out.glob("step_*.vtu")) == [f"step_{i + 1:03d}.vtu" for i in range(len(steps))]
+    assert capsys.readouterr().err == ""
+
+
+@pytest.mark.parametrize("args, field", [
+    (["--level", "-1"], "--level"),
+    (["--level", "40"], "--level"),          # refused by the memory estimate, before any grid
+])
+def test_run_bad_input_exits_2_with_one_line(tmp_path, capsys, args, field):
+    out = tmp_path / "out"
+    code = main(["run", _write(tmp_path, LINK), "--surface", "facets", "--out", str(out), *args])
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and field in err[0]
+    assert not (out / "summary.json").exists()
+
+
+def test_memory_guard_message_names_the_need(tmp_path, capsys):
+    code = main(["run", _write(tmp_path, LINK), "--level", "12", "--surface", "nurbs_fe",
+                 "--out", str(tmp_path / "o")])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "GiB" in err and "available" in err and "DOFs" in err
+
+
+def test_run_rejects_case_errors_like_check(tmp_path, capsys):
+    bad = LINK.replace("outer_passes: 6", "outer_passes: 6, ghost_penalty: -1")
+    code = main(["run", _write(tmp_path, bad), "--level", "0", "--surface", "facets", "--out", str(tmp_path)])
+    assert code == 2
+    assert "ghost_penalty" in capsys.readouterr().err
