@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from cgfem.fem._pattern_kernels import dof_pattern, node_neighbours
 from cgfem.fem.space import Space
 
 
@@ -66,43 +67,15 @@ def colours(space: Space) -> tuple[np.ndarray, ...]:
     return tuple(np.flatnonzero(colour == c) for c in range(8) if np.any(colour == c))
 
 
-def node_pairs(space: Space, extra_pairs: np.ndarray | None = None) -> np.ndarray:
-    """Sorted unique node pairs ``a * n_nodes + b`` coupled by an element (and ``extra``)."""
-    c = space.connectivity
-    keys = (c[:, :, None] * space.n_nodes + c[:, None, :]).ravel()
-    if extra_pairs is not None and extra_pairs.size:
-        a, b = extra_pairs[:, 0], extra_pairs[:, 1]
-        keys = np.concatenate([keys, a * space.n_nodes + b, b * space.n_nodes + a])
-    return np.unique(keys)
-
-
 def build_pattern(space: Space, extra_pairs: np.ndarray | None = None) -> Pattern:
     """The dof pattern of ``space``; ``extra_pairs`` (m, 2) couples further node pairs (the
-    nodes of two elements sharing a face, for the ghost penalty)."""
-    nn = space.n_nodes
-    pairs = node_pairs(space, extra_pairs)
-    a, b = pairs // nn, pairs % nn
-    per_node = np.bincount(a, minlength=nn)
-    node_ptr = np.concatenate([[0], np.cumsum(per_node)]).astype(np.int64)
-    # dof row 3a+i holds the 3 dofs of every neighbour b of a, in order
-    row_len = 3 * np.repeat(per_node, 3)
-    indptr = np.concatenate([[0], np.cumsum(row_len)]).astype(np.int64)
-    start = indptr[3 * a]                      # row 3a's start, per pair
-    rank = np.arange(pairs.size) - node_ptr[a]  # position of b among a's neighbours
-    indices = np.empty(indptr[-1], np.int64)
-    for i in range(3):
-        for k in range(3):
-            indices[start + i * 3 * per_node[a] + 3 * rank + k] = 3 * b + k
-    # scatter positions of every element entry
-    c = space.connectivity
-    keys = c[:, :, None] * nn + c[:, None, :]            # (ne, 8, 8)
-    pair_index = np.searchsorted(pairs, keys)            # index into pairs
-    a_e = c[:, :, None]
-    base = indptr[3 * a_e] + 3 * (pair_index - node_ptr[a_e])  # (ne, 8, 8): row 3a, col 3b
-    rowlen = 3 * per_node[a_e]                           # length of each of a's dof rows
-    i = np.arange(3).reshape(1, 1, 3, 1, 1)
-    k = np.arange(3).reshape(1, 1, 1, 1, 3)
-    scatter = base[:, :, None, :, None] + i * rowlen[:, :, None, :, None] + k
-    # axes (e, a, i, b, k) -> entry (3a+i, 3b+k) of the 24x24 element matrix
-    scatter = np.ascontiguousarray(scatter.reshape(space.n_elements, 576))
-    return Pattern(3 * nn, indptr, indices, scatter, colours(space))
+    nodes of two elements sharing a face, for the ghost penalty). The scatter map is int32
+    when the number of nonzeros allows it (half the memory of int64)."""
+    extra = np.zeros((0, 2), np.int64) if extra_pairs is None else np.asarray(extra_pairs, np.int64)
+    conn = np.ascontiguousarray(space.connectivity, dtype=np.int64)
+    node_ptr, nbr = node_neighbours(conn, space.n_nodes, np.ascontiguousarray(extra[:, 0]),
+                                    np.ascontiguousarray(extra[:, 1]))
+    nnz = 9 * int(node_ptr[-1])
+    scatter = np.empty((space.n_elements, 576), np.int32 if nnz < 2**31 - 1 else np.int64)
+    indptr, indices = dof_pattern(node_ptr, nbr, conn, scatter)
+    return Pattern(space.n_dofs, indptr, indices, scatter, colours(space))

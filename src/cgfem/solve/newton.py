@@ -40,10 +40,14 @@ class NewtonResult:
 
 def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0: np.ndarray,
            solve: Callable[[object, np.ndarray], np.ndarray], *, tol: float, reference: float,
-           max_iter: int, log: Callable[[int, float], None] | None = None) -> NewtonResult:
-    """Solve ``r(u) = 0`` from ``u0`` until ``|r| <= tol * reference``."""
+           max_iter: int, log: Callable[[int, float], None] | None = None,
+           fixed_tangent: bool = False) -> NewtonResult:
+    """Solve ``r(u) = 0`` from ``u0`` until ``|r| <= tol * reference``. With
+    ``fixed_tangent`` no tangent is assembled (``solve`` gets None and must use a
+    factorization it kept: modified Newton)."""
     u = u0.copy()
-    r, K = assemble(u, True)
+    need = not fixed_tangent
+    r, K = assemble(u, need)
     norm = float(np.linalg.norm(r))
     result = NewtonResult(u, False, [norm])
     if log:
@@ -64,7 +68,7 @@ def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0
         while step >= MIN_STEP:
             candidate = u + step * du
             # the full step usually succeeds: assemble its tangent at once
-            r_new, K_new = assemble(candidate, step == 1.0)
+            r_new, K_new = assemble(candidate, need and step == 1.0)
             n_new = float(np.linalg.norm(r_new))
             if np.isfinite(n_new) and n_new ** 2 <= (1.0 - 2.0 * ARMIJO * step) * norm ** 2:
                 trial = candidate
@@ -74,7 +78,8 @@ def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0
             result.reason = "line_search"
             return result
         u, r, norm = trial, r_new, n_new
-        K = K_new if K_new is not None else assemble(u, True)[1]
+        if need:
+            K = K_new if K_new is not None else assemble(u, True)[1]
         result.u = u
         result.residuals.append(norm)
         if log:

@@ -100,15 +100,17 @@ class System:
 
 
 class _Solver:
-    """Linear solves with the factorization kept while the matrix object is unchanged."""
+    """Linear solves with the factorization kept while the matrix object is unchanged, or
+    while ``frozen`` (modified Newton: the last factorization serves for a new matrix)."""
 
     def __init__(self, backend: str, near_null: np.ndarray):
         self.backend, self.near_null = backend, near_null
         self._key, self._factor = None, None
+        self.frozen = False
         self.info: list[dict] = []
 
     def __call__(self, K: sp.csr_matrix, b: np.ndarray) -> np.ndarray:
-        if self._key is not K:
+        if self._key is not K and not (self.frozen and self._factor is not None):
             try:
                 self._factor = factorize(K, backend=self.backend, symmetric=True, near_null=self.near_null)
             except LinearSolverError as err:
@@ -128,6 +130,9 @@ def relative_change(new: list[np.ndarray], old: list[np.ndarray | None]) -> floa
 
 
 Log = Callable[[str], None]
+
+#: iterations allowed to modified Newton (frozen tangent) in outer passes after the first
+MODIFIED_NEWTON_ITERATIONS = 6
 
 
 def solve_static(system: System, steps: int, options: StaticOptions, log: Log | None = None,
@@ -176,11 +181,20 @@ def _solve_increment(system: System, solver: _Solver, u0: np.ndarray, stress0: l
         if reference is None:
             r0 = np.linalg.norm(assemble(u, False)[0])
             reference = max(float(r0), system.load_norm(t)) or 1.0
-        tic = time.perf_counter()
-        result = newton(assemble, u, solver, tol=options.newton_tol, reference=reference,
-                        max_iter=options.max_newton,
-                        log=lambda k, r: log(f"t={t:.4g} pass {outer} newton {k}: |r|/ref={r / reference:.3e}"
-                                             f"  ({time.perf_counter() - tic:.2f} s)"))
+        # later passes start close to the solution: modified Newton on the last
+        # factorization first, a full Newton solve if that does not converge quickly
+        attempts = [True, False] if outer > 1 and not system.linear else [False]
+        for frozen in attempts:
+            solver.frozen = frozen
+            tic = time.perf_counter()
+            result = newton(assemble, u, solver, tol=options.newton_tol, reference=reference,
+                            max_iter=MODIFIED_NEWTON_ITERATIONS if frozen else options.max_newton,
+                            fixed_tangent=frozen,
+                            log=lambda k, r: log(f"t={t:.4g} pass {outer} newton {k}: "
+                                                 f"|r|/ref={r / reference:.3e}  ({time.perf_counter() - tic:.2f} s)"))
+            solver.frozen = False
+            if result.converged:
+                break
         if not result.converged:
             log(f"t={t:.4g}: Newton stopped ({result.reason})")
             return None
