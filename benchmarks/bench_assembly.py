@@ -222,7 +222,7 @@ def ours(mesh: str) -> dict:
     def per_point():
         data = pattern.zeros()
         for elements in pattern.colours:
-            kern.integrate_tangent(A, 1, points.xi, points.w, points.offsets, h, elements,
+            kern.integrate_tangent(A, -1, points.xi, points.w, points.offsets, h, elements,
                                    pattern.scatter, data)
         return pattern.matrix(data)
 
@@ -257,18 +257,6 @@ def ours(mesh: str) -> dict:
         numba.set_num_threads(1)
         out["profile_pattern"] = _profile(lambda: build_pattern(space), 6)
         out["profile_neo"] = _profile(neo_hookean, 6)
-        c, nn = space.connectivity, space.n_nodes
-        keys = (c[:, :, None] * nn + c[:, None, :]).ravel()  # the node-pair keys of node_pairs
-        t_unique, _, _, p1 = measure(lambda: np.unique(keys), repeat=2)
-
-        def sort_unique():
-            s = np.sort(keys)
-            return s[np.concatenate([[True], s[1:] != s[:-1]])]
-
-        t_sort, _, _, p2 = measure(sort_unique, repeat=2)
-        out["unique_s"], out["sort_unique_s"] = t_unique, t_sort
-        out["sort_unique_same"] = bool(np.array_equal(p1, p2))
-        out["pair_keys"] = int(keys.size)
     return out
 
 
@@ -543,15 +531,8 @@ def main() -> None:
         print(f"  pattern {cube['pattern_s']:.3f} s vs linear values {runs['1']['linear_s']:.3f} s: "
               f"the pattern is {cube['pattern_s'] / (cube['pattern_s'] + runs['1']['linear_s']):.0%} "
               f"of a first assembly")
-        print(f"  np.unique of the {cube['pair_keys']} node-pair keys (in node_pairs): "
-              f"{cube['unique_s']:.3f} s; np.sort + neighbour mask on the same keys: "
-              f"{cube['sort_unique_s']:.3f} s (same result: {cube['sort_unique_same']})")
         print("  cProfile of build_pattern (tottime):")
         print("\n".join("    " + ln for ln in cube["profile_pattern"].splitlines()))
-        mib_a = [f"{r['points'] * 81 * 8 / 2**20:.0f} MiB ({label})" for label, r in
-                 (("cube", cube), ("torus", torus)) if "skipped" not in r]
-        print(f"  Neo-Hookean: tangent_batch stores A (n_points, 3, 3, 3, 3) before integrate_tangent "
-              f"reads it: {', '.join(mib_a)}")
         print("  cProfile of one Neo-Hookean add (tottime):")
         print("\n".join("    " + ln for ln in cube["profile_neo"].splitlines()))
         print()

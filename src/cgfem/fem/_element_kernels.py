@@ -67,9 +67,9 @@ def integrate_force(connectivity, P, xi, w, offsets, h, r):
 
 
 @njit(cache=True, parallel=True)
-def integrate_tangent(A, constant, xi, w, offsets, h, elements, scatter, data):
+def integrate_tangent(A, first, xi, w, offsets, h, elements, scatter, data):
     """``K[3a+i, 3b+k] += sum_p w_p dN_a/dX_J A[p, i, J, k, L] dN_b/dX_L`` over the listed
-    elements (``A[0]`` at every point if ``constant``), accumulated into CSR ``data``. The elements run in parallel, so the listed
+    elements (``A[p - first]`` at point ``p``; ``A[0]`` everywhere if ``first < 0``), accumulated into CSR ``data``. The elements run in parallel, so the listed
     ones must share no node (one colour of :func:`cgfem.fem.assembly.colours`)."""
     for q in prange(elements.size):
         e = elements[q]
@@ -79,7 +79,7 @@ def integrate_tangent(A, constant, xi, w, offsets, h, elements, scatter, data):
         T = np.empty((3, 3, 8, 3))  # T[i, J, b, k] = A[i, J, k, L] dN_b/dX_L
         for p in range(offsets[e], offsets[e + 1]):
             basis(xi[p], h, N, dN)
-            ap = p if constant == 0 else 0
+            ap = p - first if first >= 0 else 0
             for i in range(3):
                 for J in range(3):
                     for b in range(8):

@@ -20,6 +20,9 @@ from cgfem.fem._material_kernels import LINEAR_ELASTIC, stress_batch, tangent_ba
 from cgfem.fem.assembly import Pattern
 from cgfem.fem.space import ElementPoints, Space
 
+#: elements whose tangent tensors are held at once in finite strain
+CHUNK_ELEMENTS = 4096
+
 _GAUSS2 = np.stack(np.meshgrid(*[np.array([-1.0, 1.0]) / np.sqrt(3.0)] * 3, indexing="ij"),
                    axis=-1).reshape(-1, 3)
 
@@ -69,14 +72,19 @@ class Elasticity:
             return
         pts, h = self.points, self.space.h
         H = self.gradients(u)
-        if data is None:
-            P = stress_batch(self.model, H, self.mu, self.lam)[1]
-        else:
-            _, P, A = tangent_batch(self.model, H, self.mu, self.lam)
-            for elements in self.pattern.colours:
-                kern.integrate_tangent(A, 0, pts.xi, pts.w, pts.offsets, h, elements,
-                                       self.pattern.scatter, data)
+        P = stress_batch(self.model, H, self.mu, self.lam)[1]
         kern.integrate_force(self.space.connectivity, P, pts.xi, pts.w, pts.offsets, h, r)
+        if data is None:
+            return
+        # the tangent tensors of a chunk of elements at a time (81 numbers per point)
+        for e0 in range(0, self.space.n_elements, CHUNK_ELEMENTS):
+            e1 = min(e0 + CHUNK_ELEMENTS, self.space.n_elements)
+            p0, p1 = pts.offsets[e0], pts.offsets[e1]
+            A = tangent_batch(self.model, H[p0:p1], self.mu, self.lam)[2]
+            for elements in self.pattern.colours:
+                chunk = elements[(elements >= e0) & (elements < e1)]
+                kern.integrate_tangent(A, p0, pts.xi, pts.w, pts.offsets, h, chunk,
+                                       self.pattern.scatter, data)
 
     def _stiffness(self) -> np.ndarray:
         if self._linear_data is None:
@@ -96,7 +104,7 @@ class Elasticity:
         for elements in pat.colours:
             inner = elements[~cut[elements]]
             kern.scatter_reference(ke, inner, pat.scatter, data)
-            kern.integrate_tangent(A, 1, pts.xi, pts.w, pts.offsets, h, elements[cut[elements]],
+            kern.integrate_tangent(A, -1, pts.xi, pts.w, pts.offsets, h, elements[cut[elements]],
                                    pat.scatter, data)
         return data
 
@@ -108,5 +116,5 @@ def reference_matrix(A: np.ndarray, h: float) -> np.ndarray:
     offsets = np.array([0, 8], np.int64)
     scatter = np.arange(576, dtype=np.int64).reshape(1, 576)
     data = np.zeros(576)
-    kern.integrate_tangent(A[None], 1, _GAUSS2, w, offsets, h, np.array([0], np.int64), scatter, data)
+    kern.integrate_tangent(A[None], -1, _GAUSS2, w, offsets, h, np.array([0], np.int64), scatter, data)
     return data.reshape(24, 24)
