@@ -4,7 +4,7 @@
   fill, 10-20 % slower on H8 elasticity); symmetric matrices in symmetric mode (diagonal
   pivots, threshold 0.01). Never ``spsolve``: with scikit-umfpack it silently uses UMFPACK.
 - ``pardiso``: MKL PARDISO through one :class:`pypardiso.PyPardisoSolver` per solver (freed
-  with it); symmetric matrices as type -2 (upper triangle), 3-4x faster and half the memory
+  with it); symmetric matrices as type -2 (upper triangle), 2-4x faster and half the memory
   of the non-symmetric type 11 at 30k-100k DOFs.
 - ``pyamg``: smoothed aggregation on 3x3 nodal blocks with the near-null space (rigid-body
   modes) as preconditioner of CG (symmetric) or GMRES(50), after the symmetric diagonal
@@ -16,20 +16,21 @@ Each solver keeps its own copy of ``A`` (the caller may overwrite its matrix). D
 must reach ``||b - Ax|| <= 1e-8 ||b||``, after at most two steps of iterative refinement:
 this catches (numerically) singular matrices, whose pivots MKL perturbs instead of failing.
 
-``auto``, from ``benchmarks/bench_solvers.py`` (clamped H8 cube, 2 cores shared with other
-jobs, setup + first solve in seconds):
+``auto``, from ``benchmarks/bench_solvers.py`` (clamped H8 cube; 2 cores shared with other
+jobs, so times vary up to 2x between runs). Seconds for setup + first solve / a re-solve:
 
-=========  =====  =====  =====  =====  =====
-DOFs        9.5k    30k    95k   173k   286k
-superlu      0.7    8.6    131      -      -
-pardiso      0.2    1.3     16     51     76
-pyamg        0.5    2.4    6.7     12     17
-=========  =====  =====  =====  =====  =====
+=========  ==========  ==========  ==========  ==========  ==========
+DOFs       9.5k        30k         95k         173k        286k
+superlu    0.6 / 0.01  7.1 / 0.04  97 / 0.5    skipped     skipped
+pardiso    0.1 / 0.01  0.7 / 0.07  8.8 / 0.3   28 / 0.6    52 / 0.8
+pyamg      0.2 / 0.11  0.6 / 0.45  4.5 / 2.8   11 / 5.1    11 / 5.9
+=========  ==========  ==========  ==========  ==========  ==========
 
-so symmetric systems go to pardiso up to :data:`PARDISO_MAX_DOFS` (within ~2x of pyamg and
-insensitive to conditioning; 4x slower beyond) and to pyamg above; without pypardiso, to
-superlu up to :data:`SUPERLU_MAX_DOFS` (under 1 s), then pyamg. Non-symmetric systems go
-to pardiso, else superlu (pyamg only on request).
+Symmetric systems go to pardiso up to :data:`PARDISO_MAX_DOFS` (at most 2x pyamg's first
+solve, ahead from its second solve, insensitive to conditioning; at 173k it needs 5 solves per
+factorization to break even, at 286k 9) and to pyamg above; without pypardiso, to superlu
+up to :data:`SUPERLU_MAX_DOFS` (under 1 s), then pyamg. Non-symmetric systems go to pardiso,
+else superlu (pyamg only on request). Peak memory at 286k: pardiso 4.1 GB, pyamg 0.9 GB.
 """
 
 from __future__ import annotations

@@ -64,6 +64,8 @@ class System:
         sizes = [b.n_dofs for b in bodies]
         self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         self.linear = not any(b.finite for b in bodies)
+        #: the tangent is symmetric: hyperelastic bulk, penalties, frozen recovered stress
+        self.symmetric = True
         self._K: sp.csr_matrix | None = None
 
     @property
@@ -103,8 +105,8 @@ class _Solver:
     """Linear solves with the factorization kept while the matrix object is unchanged, or
     while ``frozen`` (modified Newton: the last factorization serves for a new matrix)."""
 
-    def __init__(self, backend: str, near_null: np.ndarray):
-        self.backend, self.near_null = backend, near_null
+    def __init__(self, backend: str, near_null: np.ndarray, symmetric: bool = True):
+        self.backend, self.near_null, self.symmetric = backend, near_null, symmetric
         self._key, self._factor = None, None
         self.frozen = False
         self.info: list[dict] = []
@@ -112,7 +114,8 @@ class _Solver:
     def __call__(self, K: sp.csr_matrix, b: np.ndarray) -> np.ndarray:
         if self._key is not K and not (self.frozen and self._factor is not None):
             try:
-                self._factor = factorize(K, backend=self.backend, symmetric=True, near_null=self.near_null)
+                self._factor = factorize(K, backend=self.backend, symmetric=self.symmetric,
+                                         near_null=self.near_null)
             except LinearSolverError as err:
                 raise RuntimeError(str(err)) from err
             self._key = K
@@ -139,7 +142,7 @@ def solve_static(system: System, steps: int, options: StaticOptions, log: Log | 
                  on_step: Callable[[StepRecord], None] | None = None) -> StaticResult:
     """Run the load steps; ``on_step`` is called after every converged (sub)step."""
     log = log or (lambda message: None)
-    solver = _Solver(options.linear, system.near_null())
+    solver = _Solver(options.linear, system.near_null(), system.symmetric)
     u = np.zeros(system.n_dofs)
     stress: list[np.ndarray | None] = [None] * len(system.bodies)
     t, records = 0.0, []
