@@ -94,7 +94,7 @@ def solve_manufactured(solid, field: CubicField, h0: float, level: int, offset, 
     uh = space.interpolate(u.reshape(-1, 3), pts.element, pts.xi)
     ue = field.value(pts.x)
     l2 = np.sqrt(np.sum(pts.w * np.sum((uh - ue) ** 2, 1)) / np.sum(pts.w * np.sum(ue ** 2, 1)))
-    eta, _ = spr.zz_estimate(space, pts, sigma_h, spr.recovered_at(space, step.stress[0], pts.element, pts.xi),
+    eta, _ = spr.zz_estimate(space, pts, sigma_h, spr.recovered_at(space, step.recovered[0], pts.element, pts.xi),
                              mu, lam)
     return {"h": space.h, "energy": error / spr.energy_norm(pts, sigma, mu, lam), "l2": l2,
             "effectivity": eta / error, "dofs": model.n_dofs, "passes": step.outer_passes,

@@ -115,7 +115,7 @@ def build_models(case: Case, level: int, surface: str, log: Callable[[str], None
     return models, measures
 
 
-def step_outputs(model: BodyModel, u: np.ndarray, stress: np.ndarray) -> dict:
+def step_outputs(model: BodyModel, u: np.ndarray) -> dict:
     """Nodal fields for the VTU file and scalars for the summary of one body at one step."""
     from cgfem.fem import spr
 
@@ -157,7 +157,7 @@ def run_case(case: Case, level: int, surface: str, out: Path,
     steps: list[dict] = []
 
     def on_step(record: StepRecord) -> None:
-        outputs = [step_outputs(m, u, s) for m, u, s in zip(models, record.u, record.stress)]
+        outputs = [step_outputs(m, u) for m, u in zip(models, record.u)]
         write_step(out, len(steps) + 1, outputs)
         reactions = {}
         for m, u, s in zip(models, record.u, record.stress):

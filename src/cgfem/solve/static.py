@@ -45,7 +45,8 @@ class StepRecord:
     outer_passes: int
     outer_changes: list[float]
     u: list[np.ndarray] = field(repr=False)
-    stress: list[np.ndarray] = field(repr=False)
+    stress: list[np.ndarray | None] = field(repr=False)     # the recovered stress the last solve used
+    recovered: list[np.ndarray] = field(repr=False)         # recovered from the converged u
     seconds: float = 0.0
 
 
@@ -161,10 +162,10 @@ def solve_static(system: System, steps: int, options: StaticOptions, log: Log | 
                                         f"after {options.max_cutbacks} cut-backs")
                 log(f"cut-back {cutbacks}: increment halved")
                 continue
-            u, stress, residuals, changes = outcome
+            u, used, stress, residuals, changes = outcome
             t = t_new
             record = StepRecord(t, residuals, len(changes), changes, system.split(u.copy()),
-                                stress, time.perf_counter() - start)
+                                used, stress, time.perf_counter() - start)
             records.append(record)
             if on_step:
                 on_step(record)
@@ -173,7 +174,8 @@ def solve_static(system: System, steps: int, options: StaticOptions, log: Log | 
 
 def _solve_increment(system: System, solver: _Solver, u0: np.ndarray, stress0: list, t: float,
                      options: StaticOptions, log: Log):
-    """Outer loop at load factor ``t``; None when Newton fails."""
+    """Outer loop at load factor ``t``: (u, stress used by the last solve, stress recovered
+    from u, Newton residuals per pass, stress changes per pass); None when Newton fails."""
     u, stress = u0, list(stress0)
     changes: list[float] = []
     residuals: list[list[float]] = []
@@ -203,10 +205,11 @@ def _solve_increment(system: System, solver: _Solver, u0: np.ndarray, stress0: l
             return None
         u = result.u
         residuals.append(result.residuals)
-        new = system.recover(u)
-        changes.append(relative_change(new, stress))
-        stress = new
+        used, stress = stress, system.recover(u)
+        changes.append(relative_change(stress, used))
         log(f"t={t:.4g} pass {outer}: recovered stress changed by {changes[-1]:.3e}")
         if changes[-1] <= options.outer_tol:
             break
-    return u, stress, residuals, changes
+    # reactions are in equilibrium with the stress the last solve used; the next step starts
+    # from the newest recovery
+    return u, used, stress, residuals, changes
