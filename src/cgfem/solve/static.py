@@ -96,6 +96,16 @@ class System:
     def load_norm(self, t: float) -> float:
         return float(t * np.sqrt(sum(np.dot(b.load, b.load) for b in self.bodies)))
 
+    def force_scale(self, u: np.ndarray) -> float:
+        """Norm of the bulk internal force at ``u``: the size of the forces in play, against
+        which Newton's residual is measured (it does not shrink with the load increment)."""
+        total = 0.0
+        for body, ub in zip(self.bodies, self.split(u)):
+            f = np.zeros(body.n_dofs)
+            body.elasticity.add(ub, f, None)
+            total += float(np.dot(f, f))
+        return float(np.sqrt(total))
+
     def near_null(self) -> np.ndarray:
         """Rigid-body modes of every body, block by block (n_dofs, 6 n_bodies)."""
         blocks = [rigid_body_modes(b.space.coordinates) for b in self.bodies]
@@ -184,8 +194,11 @@ def _solve_increment(system: System, solver: _Solver, u0: np.ndarray, stress0: l
         def assemble(v, tangent, stress=stress):
             return system.assemble(v, t, stress, tangent)
         if reference is None:
+            # the forces in play: the first residual of the increment, the dead loads, the
+            # internal forces already carried (a cut-back increment has a tiny residual, but
+            # round-off scales with the internal forces)
             r0 = np.linalg.norm(assemble(u, False)[0])
-            reference = max(float(r0), system.load_norm(t)) or 1.0
+            reference = max(float(r0), system.load_norm(t), system.force_scale(u)) or 1.0
         # later passes start close to the solution: modified Newton on the last
         # factorization first, a full Newton solve if that does not converge quickly
         attempts = [True, False] if outer > 1 and not system.linear else [False]
