@@ -74,8 +74,17 @@ def check_memory(case: Case, level: int, solids: dict, available: int | None = N
     need, dofs = estimate_memory(case, level, solids)
     have = available_memory() if available is None else available
     if need > have:
-        raise InputError("--level", f"level {level} needs about {need / 2**30:.1f} GiB "
-                         f"(~{dofs:,} DOFs), but only {have / 2**30:.1f} GiB are available")
+        raise InputError("--level", f"level {level} needs about {_size(need)} "
+                         f"(~{dofs:.2g} DOFs), but only {_size(have)} are available")
+
+
+def _size(n_bytes: float) -> str:
+    """``n_bytes`` in GiB, TiB, PiB or EiB, whichever reads best."""
+    for unit in ("GiB", "TiB", "PiB"):
+        n_bytes /= 1024.0 ** (3 if unit == "GiB" else 1)
+        if n_bytes < 1024.0:
+            return f"{n_bytes:.1f} {unit}"
+    return f"{n_bytes / 1024.0:.1f} EiB"
 
 
 def discretization_of(case: Case) -> Discretization:
