@@ -22,6 +22,7 @@ from cgfem.embedding.quadrature import embed, grid_for
 from cgfem.errors import InputError
 from cgfem.fem.body import BodyModel, Discretization, boundary_of
 from cgfem.fem.materials import von_mises
+from cgfem.fem import spr
 from cgfem.fem.spr import energy_norm, zz_estimate
 from cgfem.geometry.builders import build_solid
 from cgfem.geometry.measure import areas_by_name, volume
@@ -126,12 +127,8 @@ def build_models(case: Case, level: int, surface: str, log: Callable[[str], None
 
 def step_outputs(model: BodyModel, u: np.ndarray) -> dict:
     """Nodal fields for the VTU file and scalars for the summary of one body at one step."""
-    from cgfem.fem import spr
-
     space, el = model.space, model.elasticity
-    slots, xi = spr.sampling_points(space)
-    from cgfem.fem.body import _points
-    nodal_cauchy = spr.recover(model.recovery, model.cauchy(u, _points(space, slots, xi)))
+    nodal_cauchy = spr.recover(model.recovery, model.cauchy(u, model.sampling_points()))
     vm_nodes = von_mises(nodal_cauchy)
     vol = el.points
     sigma_h = model.cauchy(u)

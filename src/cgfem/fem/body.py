@@ -115,9 +115,11 @@ class BodyModel:
     # -- recovered stress and outputs ------------------------------------------------------
     def recover(self, u: np.ndarray) -> np.ndarray:
         """Nodal recovered stress (n_nodes, 3, 3): SPR of ``P`` (Cauchy in small strain)."""
-        slots, xi = spr.sampling_points(self.space)
-        pts = _points(self.space, slots, xi)
-        return spr.recover(self.recovery, self.elasticity.stress(u, pts))
+        return spr.recover(self.recovery, self.elasticity.stress(u, self.sampling_points()))
+
+    def sampling_points(self) -> ElementPoints:
+        """The SPR sampling points of the space."""
+        return self.space.points_at(*spr.sampling_points(self.space))
 
     def reactions(self, u: np.ndarray, t: float, stress: np.ndarray | None) -> dict[str, np.ndarray]:
         return {d.label: d.reaction(u, t, stress) for d in self.dirichlet}
@@ -126,14 +128,6 @@ class BodyModel:
         """Cauchy stress (n, 3, 3) at ``points`` (default: the volume rule)."""
         el = self.elasticity
         return cauchy_batch(el.model, el.gradients(u, points), el.mu, el.lam)
-
-
-def _points(space: Space, slots: np.ndarray, xi: np.ndarray) -> ElementPoints:
-    """Points given by (slot, xi), grouped by element (must be sorted by slot)."""
-    counts = np.bincount(slots, minlength=space.n_elements)
-    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    x = space.centres()[slots] + 0.5 * space.h * xi
-    return ElementPoints(np.ascontiguousarray(xi), x, np.zeros(len(slots)), offsets)
 
 
 def boundary_of(case: Case, body: str) -> list:

@@ -131,6 +131,17 @@ class Space:
         offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         return ElementPoints(self.local(x, slots), x, np.asarray(w, float)[order], offsets)
 
+    def points_at(self, slots: np.ndarray, xi: np.ndarray) -> ElementPoints:
+        """Points given by active element and local coordinates (sorted by element), with
+        zero weights: where to evaluate a field, not a quadrature rule."""
+        slots = np.asarray(slots, np.int64)
+        if np.any(np.diff(slots) < 0):
+            raise ValueError("points must be sorted by element")
+        counts = np.bincount(slots, minlength=self.n_elements)
+        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        xi = np.ascontiguousarray(xi, dtype=float)
+        return ElementPoints(xi, self.centres()[slots] + 0.5 * self.h * xi, np.zeros(slots.size), offsets)
+
     def volume_points(self, embedding: Embedding) -> ElementPoints:
         rule = embedding.volume
         return self.group(rule.x, rule.w, rule.element)
