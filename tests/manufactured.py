@@ -70,10 +70,10 @@ class CubicField:
 
 
 def solve_manufactured(solid, field: CubicField, h0: float, level: int, offset, E=1.0, nu=0.3,
-                       gamma=0.05, linear="auto") -> dict:
+                       gamma=0.05, linear="auto", surface="nurbs") -> dict:
     """Weak Dirichlet ``u = field`` on the whole surface, the balancing body force; returns
     relative energy and L2 errors, the ZZ estimate and the model size."""
-    emb = embed(solid, grid_for(solid, h0, level, offset))
+    emb = embed(solid, grid_for(solid, h0, level, offset), surface)
     body = Body("b", SphereSpec(center=(0.0, 0.0, 0.0), radius=1.0), Material("linear_elastic", E, nu),
                 GridSpec(h0))   # geometry here is unused: the embedding is given
     model = BodyModel.build(body, emb, [], Discretization(ghost_gamma=gamma))

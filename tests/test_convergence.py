@@ -30,11 +30,12 @@ def test_manufactured_field_is_consistent():
     assert np.allclose(field.body_force(x, mu, lam), -div, atol=1e-8)
 
 
-@pytest.mark.parametrize("shape, h0", [("sphere", 0.7), ("torus", 0.6)])
-def test_energy_and_l2_rates_and_zz_effectivity(shape, h0):
+@pytest.mark.parametrize("shape, h0, surface", [("sphere", 0.7, "nurbs"), ("torus", 0.6, "nurbs"),
+                                                ("sphere", 0.7, "facets")])
+def test_energy_and_l2_rates_and_zz_effectivity(shape, h0, surface):
     solid = build_solid(SphereSpec(center=(0.1, -0.2, 0.05), radius=1.0)) if shape == "sphere" else _torus()
     field = CubicField.random(11)
-    runs = [solve_manufactured(solid, field, h0, level, OFFSET) for level in range(4)]
+    runs = [solve_manufactured(solid, field, h0, level, OFFSET, surface=surface) for level in range(4)]
     h = np.array([r["h"] for r in runs])
     energy_rate = np.polyfit(np.log(h), np.log([r["energy"] for r in runs]), 1)[0]
     l2_rate = np.polyfit(np.log(h), np.log([r["l2"] for r in runs]), 1)[0]
