@@ -119,3 +119,25 @@ def test_run_rejects_case_errors_like_check(tmp_path, capsys):
     code = main(["run", _write(tmp_path, bad), "--level", "0", "--surface", "facets", "--out", str(tmp_path)])
     assert code == 2
     assert "ghost_penalty" in capsys.readouterr().err
+
+
+def test_interrupted_run_leaves_no_summary(tmp_path):
+    """Ctrl-C mid-run: exit 130, one line, and nothing that looks like a finished run."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "out"
+    case = _write(tmp_path, LINK.replace("steps: 2", "steps: 40"))
+    proc = subprocess.Popen([sys.executable, "-m", "cgfem", "run", case, "--level", "1", "--surface",
+                             "nurbs_fe", "--out", str(out)], stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while not list(out.glob("step_*.vtu")) and time.time() < deadline:   # wait for a step
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGINT)
+    err = proc.communicate(timeout=60)[1]
+    assert proc.returncode == 130
+    assert err.strip().splitlines()[-1] == "cgfem: interrupted"
+    assert not (out / "summary.json").exists()
+    assert not list(out.glob(".*.tmp"))

@@ -199,6 +199,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except InputError as err:
         print(f"cgfem: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except KeyboardInterrupt:  # the files written so far are complete; no summary.json yet
+        print("cgfem: interrupted", file=sys.stderr)
+        return 130
     except BrokenPipeError:  # output piped into a pager or `head` that stopped reading
         sys.stdout = None
         return EXIT_OK
