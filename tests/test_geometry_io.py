@@ -10,8 +10,8 @@ import os
 import numpy as np
 import pytest
 
+from cgfem import atomic
 from cgfem.errors import InputError
-from cgfem.geometry import io
 from cgfem.geometry.builders import build_solid
 from cgfem.geometry.io import read_solid, solid_from_dict, solid_to_dict, write_solid
 from cgfem.geometry.solid import Solid
@@ -73,7 +73,7 @@ def test_write_is_atomic(tmp_path, monkeypatch):
     def broken(src, dst):
         raise OSError("disk full")
 
-    monkeypatch.setattr(io.os, "replace", broken)
+    monkeypatch.setattr(atomic.os, "replace", broken)
     with pytest.raises(OSError, match="disk full"):
         write_solid(build_solid(SPECS["sphere"]), path)
     assert path.read_bytes() == before  # the old file is untouched

@@ -8,29 +8,18 @@ without it holds no finished run (a new run first removes the old summary).
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import meshio
 import numpy as np
 
-from cgfem.embedding.export import _fsync, _new_temporary, active_hex_mesh, write_vtu_files
+from cgfem.atomic import write_text_atomic
+from cgfem.embedding.export import active_hex_mesh, write_vtu_files
 
 
 def write_json_atomic(path: Path, data: dict) -> Path:
-    """Write ``data`` as indented JSON to ``path`` atomically."""
-    path = Path(path)
-    tmp = _new_temporary(path)
-    try:
-        with open(tmp, "w") as f:
-            json.dump(data, f, indent=2, allow_nan=False, default=_jsonable)
-            f.write("\n")
-        _fsync(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return path
+    """Write ``data`` as indented JSON to ``path`` atomically (NaN and inf refused)."""
+    return write_text_atomic(path, json.dumps(data, indent=2, allow_nan=False, default=_jsonable) + "\n")
 
 
 def _jsonable(value):

@@ -29,13 +29,13 @@ any) untouched and removes its temporary files.
 from __future__ import annotations
 
 import os
-import secrets
 from collections.abc import Mapping
 from pathlib import Path
 
 import meshio
 import numpy as np
 
+from cgfem.atomic import fsync, new_temporary
 from cgfem.embedding.grid import CartesianGrid
 from cgfem.embedding.quadrature import Embedding
 
@@ -127,10 +127,10 @@ def write_vtu_files(files: Mapping[Path, meshio.Mesh]) -> list[Path]:
     try:
         for target, mesh in files.items():
             target = Path(target)
-            tmp = _new_temporary(target)
+            tmp = new_temporary(target)
             staged.append((tmp, target))
             meshio.write(tmp, mesh, file_format=VTK_FORMAT)
-            _fsync(tmp)
+            fsync(tmp)
         for tmp, target in staged:
             os.replace(tmp, target)
     except BaseException:
@@ -138,22 +138,3 @@ def write_vtu_files(files: Mapping[Path, meshio.Mesh]) -> list[Path]:
             tmp.unlink(missing_ok=True)
         raise
     return [target for _, target in staged]
-
-
-def _new_temporary(target: Path) -> Path:
-    """Create an empty hidden file ``.{target.name}.XXXXXXXX.tmp`` next to ``target``, with
-    the permissions an ordinary new file would have (unlike :func:`tempfile.mkstemp`'s 0600)."""
-    for _ in range(100):
-        tmp = target.parent / f".{target.name}.{secrets.token_hex(4)}.tmp"
-        try:
-            os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
-        except FileExistsError:
-            continue
-        return tmp
-    raise FileExistsError(f"no free temporary name next to {target}")
-
-
-def _fsync(path: Path) -> None:
-    """Flush the content of ``path`` to disk, so a rename never exposes a partial file."""
-    with open(path, "rb") as f:
-        os.fsync(f.fileno())

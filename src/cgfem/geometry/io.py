@@ -33,12 +33,11 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import secrets
 from pathlib import Path
 
 import numpy as np
 
+from cgfem.atomic import write_text_atomic
 from cgfem.errors import InputError
 from cgfem.geometry.nurbs import NurbsSurface
 from cgfem.geometry.solid import Patch, Solid
@@ -95,19 +94,7 @@ def _dumps(data: dict) -> str:
 def write_solid(solid: Solid, path) -> None:
     """Write ``solid`` to ``path`` atomically: a temporary file in the same folder is written,
     flushed to disk and renamed over ``path`` (readers never see a partial file)."""
-    path = Path(path)
-    text = _dumps(solid_to_dict(solid))
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)  # mode subject to the umask
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as stream:
-            stream.write(text)
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    write_text_atomic(Path(path), _dumps(solid_to_dict(solid)))
 
 
 # -- reading ------------------------------------------------------------------------------
