@@ -137,7 +137,25 @@ def test_interrupted_run_leaves_no_summary(tmp_path):
         time.sleep(0.2)
     proc.send_signal(signal.SIGINT)
     err = proc.communicate(timeout=60)[1]
-    assert proc.returncode == 130
+    assert proc.returncode == 130, err[-3000:]
     assert err.strip().splitlines()[-1] == "cgfem: interrupted"
     assert not (out / "summary.json").exists()
     assert not list(out.glob(".*.tmp"))
+
+
+def test_uniform_stress_run_reports_its_von_mises_and_reactions(tmp_path):
+    from cgfem.run import run_case
+    from elasticity_cases import uniform_stress_case
+
+    sigma = np.array([[3.0, 1.0, 0.5], [1.0, -2.0, 0.3], [0.5, 0.3, 1.0]]) * 1e6
+    case, _ = uniform_stress_case(sigma, 2.0e9, 0.3, (0.37, 0.61, 0.18))
+    status = run_case(case, 0, "nurbs_fe", tmp_path)
+    assert status.status == "converged"
+    step = json.loads(status.summary.read_text())["steps"][-1]
+    s = sigma - np.trace(sigma) / 3 * np.eye(3)
+    vm = np.sqrt(1.5 * np.sum(s * s))
+    assert abs(step["max_von_mises"]["b"] - vm) < 1e-8 * vm
+    assert np.allclose(step["reactions"]["b/xmin+ymin+zmin"], -sigma.sum(axis=1), rtol=0, atol=1e-8 * vm)
+    mesh = meshio.read(tmp_path / "step_001.vtu")
+    assert np.allclose(mesh.point_data["von_mises"], vm, rtol=1e-8)
+    assert np.allclose(mesh.point_data["stress"], sigma.ravel(), rtol=0, atol=1e-8 * vm)

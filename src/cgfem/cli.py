@@ -148,6 +148,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    import signal
     import time
 
     from cgfem.case.load import load_case
@@ -155,12 +156,25 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     case = load_case(args.case)
     start = time.perf_counter()
+    interrupted = []
+
+    def on_interrupt(signum, frame) -> None:
+        # stop at the next progress point, outside compiled code; a second Ctrl-C at once
+        if interrupted:
+            raise KeyboardInterrupt
+        interrupted.append(signum)
 
     def log(message: str) -> None:
+        if interrupted:
+            raise KeyboardInterrupt
         if not args.quiet:
             print(f"[{time.perf_counter() - start:8.2f} s] {message}", file=sys.stderr, flush=True)
 
-    status = run_case(case, args.level, args.surface, args.out, log)
+    previous = signal.signal(signal.SIGINT, on_interrupt)
+    try:
+        status = run_case(case, args.level, args.surface, args.out, log)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     log(f"{status.status}: {status.summary}" + (f" ({status.message})" if status.message else ""))
     return EXIT_OK if status.status == "converged" else EXIT_FAILED
 

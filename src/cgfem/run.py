@@ -134,15 +134,20 @@ def step_outputs(model: BodyModel, u: np.ndarray) -> dict:
     sigma_h = model.cauchy(u)
     at_points = spr.recovered_at(space, nodal_cauchy, vol.element, vol.xi)
     vm_points = von_mises(at_points)
-    inside = vol.w > 0.0
+    # peak stress where the material is: volume points of inside elements (those of cut
+    # elements may lie in the void) and every point of the boundary rule
+    inner = ~space.cut[vol.element]
+    boundary = model.boundary_points
+    vm_boundary = von_mises(boundary.interpolate(space, nodal_cauchy))
     per_element = np.zeros(space.n_elements)
-    np.maximum.at(per_element, vol.element[inside], vm_points[inside])
+    np.maximum.at(per_element, vol.element[inner], vm_points[inner])
+    np.maximum.at(per_element, boundary.slots, vm_boundary)
     eta, _ = zz_estimate(space, vol, sigma_h, at_points, el.mu, el.lam)
     norm = energy_norm(vol, sigma_h, el.mu, el.lam)
     status = np.where(space.cut, 2, 1)
     return {"grid": space.grid, "elements": space.elements, "displacement": u.reshape(-1, 3),
             "stress": nodal_cauchy, "von_mises": vm_nodes, "status": status,
-            "element_von_mises": per_element, "max_von_mises": float(vm_points[inside].max(initial=0.0)),
+            "element_von_mises": per_element, "max_von_mises": float(per_element.max(initial=0.0)),
             "error_estimate": float(eta), "energy_norm": float(norm)}
 
 

@@ -52,6 +52,7 @@ class BodyModel:
     recovery: spr.Recovery
     E: float
     _ghost_pos: np.ndarray | None = field(default=None, repr=False)
+    _boundary: BoundaryPoints | None = field(default=None, repr=False)
 
     @classmethod
     def build(cls, body: Body, embedding: Embedding, boundary: list, options: Discretization) -> "BodyModel":
@@ -120,6 +121,14 @@ class BodyModel:
     def sampling_points(self) -> ElementPoints:
         """The SPR sampling points of the space."""
         return self.space.points_at(*spr.sampling_points(self.space))
+
+    @property
+    def boundary_points(self) -> BoundaryPoints:
+        """Every point of the boundary rule, grouped by element (built once)."""
+        if self._boundary is None:
+            surface = self.embedding.surface
+            self._boundary = BoundaryPoints.of(self.space, surface, np.ones(surface.w.size, bool))
+        return self._boundary
 
     def reactions(self, u: np.ndarray, t: float, stress: np.ndarray | None) -> dict[str, np.ndarray]:
         return {d.label: d.reaction(u, t, stress) for d in self.dirichlet}
