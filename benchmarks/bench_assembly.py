@@ -43,6 +43,7 @@ import sys
 import time
 
 import numpy as np
+from _memory import reset_peak, status_kib
 
 N_CUBE = 32                      # elements per edge of the unit cube
 E_MOD, NU = 1.0, 0.3             # material (the matrices scale linearly with E)
@@ -58,24 +59,6 @@ REPEAT = 3
 
 
 # -- measurement ------------------------------------------------------------------------------
-def _status_kib(key: str) -> int:
-    with open("/proc/self/status") as f:
-        for line in f:
-            if line.startswith(key + ":"):
-                return int(line.split()[1])
-    raise KeyError(key)
-
-
-def _reset_peak() -> bool:
-    """Reset VmHWM to the current RSS (Linux >= 4.0); False if not possible."""
-    try:
-        with open("/proc/self/clear_refs", "w") as f:
-            f.write("5")
-        return True
-    except OSError:
-        return False
-
-
 PEAK_METHOD = {"exact": "VmHWM reset per run"}
 
 
@@ -90,12 +73,12 @@ def measure(fn, repeat: int = REPEAT, warmup: bool = True):
     for _ in range(repeat):
         res = None
         gc.collect()
-        rss0 = _status_kib("VmRSS")
-        exact = _reset_peak()
+        rss0 = status_kib("VmRSS")
+        exact = reset_peak()
         t0, c0 = time.perf_counter(), time.process_time()
         res = fn()
         dt, dc = time.perf_counter() - t0, time.process_time() - c0
-        peak = _status_kib("VmHWM") if exact else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        peak = status_kib("VmHWM") if exact else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
         if not exact:
             PEAK_METHOD["exact"] = "ru_maxrss (not reset: upper bound)"
         if dt < best:
@@ -123,11 +106,7 @@ def cube_space(n: int):
 
     grid = CartesianGrid(1.0 / n, (0.0, 0.0, 0.0), (n, n, n))
     elements = np.arange(grid.n_elements, dtype=np.int64)
-    nodes = np.arange(grid.n_nodes, dtype=np.int64)
-    _, ny, nz = grid.node_shape
-    ijk = np.stack([nodes // (ny * nz), (nodes // nz) % ny, nodes % nz], axis=-1)
-    space = Space(grid, elements, nodes, grid.element_nodes(elements).astype(np.int64),
-                  grid.node_coordinates(ijk), np.zeros(elements.size, bool))
+    space = Space.of_elements(grid, elements, np.zeros(elements.size, bool))
     g = 1.0 / np.sqrt(3.0)
     gauss = np.array([[a, b, c] for a in (-g, g) for b in (-g, g) for c in (-g, g)])
     xi = np.tile(gauss, (elements.size, 1))

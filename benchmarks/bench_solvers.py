@@ -26,17 +26,10 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _memory import reset_peak, status_kib
 
 SUPERLU_BUDGET_S = 120.0  # superlu is skipped above SUPERLU_ALWAYS_DOFS when expected slower
 SUPERLU_ALWAYS_DOFS = 100_000
-
-
-def _status_kib(key: str) -> int:
-    with open("/proc/self/status") as fh:
-        for line in fh:
-            if line.startswith(key + ":"):
-                return int(line.split()[1])
-    return 0
 
 
 def run_one(backend: str, n: int) -> dict:
@@ -53,13 +46,8 @@ def run_one(backend: str, n: int) -> dict:
     B = rigid_body_modes(coords)[free]
     others = [np.roll(f, 3 * k + 1) for k in range(3)]  # lateral loads on other nodes
     gc.collect()
-    base = _status_kib("VmRSS")
-    try:
-        with open("/proc/self/clear_refs", "w") as fh:  # reset the peak RSS (VmHWM)
-            fh.write("5")
-        hwm_ok = True
-    except OSError:
-        hwm_ok = False
+    base = status_kib("VmRSS")
+    hwm_ok = reset_peak()
     t0 = time.perf_counter()
     solver = factorize(K, backend=backend, symmetric=True, near_null=B, rtol=1e-10)
     t1 = time.perf_counter()
@@ -68,7 +56,7 @@ def run_one(backend: str, n: int) -> dict:
     for g in others:
         solver.solve(g)
     t3 = time.perf_counter()
-    peak = _status_kib("VmHWM") - base if hwm_ok else float("nan")
+    peak = status_kib("VmHWM") - base if hwm_ok else float("nan")
     return {"backend": solver.backend, "n": n, "dofs": K.shape[0], "nnz": K.nnz,
             "setup_s": t1 - t0, "solve_s": t2 - t1, "resolve_s": (t3 - t2) / len(others),
             "iterations": solver.info["iterations"],

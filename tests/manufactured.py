@@ -7,13 +7,13 @@ import itertools
 
 import numpy as np
 
-from cgfem.case.model import Body, GridSpec, Material
+from cgfem.case.model import Body, GridSpec, Material, SolverOptions
 from cgfem.embedding.quadrature import embed, grid_for
 from cgfem.fem import spr
-from cgfem.fem.body import BodyModel, Discretization
+from cgfem.fem.body import BodyModel
 from cgfem.fem.boundary import BoundaryPoints, WeakDirichlet, body_force_load
 from cgfem.geometry.specs import SphereSpec
-from cgfem.solve.static import StaticOptions, System, solve_static
+from cgfem.solve.static import System, solve_static
 
 #: exponents (a, b, c) of x^a y^b z^c with a + b + c <= 3
 MONOMIALS = [m for m in itertools.product(range(4), repeat=3) if sum(m) <= 3]
@@ -76,7 +76,8 @@ def solve_manufactured(solid, field: CubicField, h0: float, level: int, offset, 
     emb = embed(solid, grid_for(solid, h0, level, offset), surface)
     body = Body("b", SphereSpec(center=(0.0, 0.0, 0.0), radius=1.0), Material("linear_elastic", E, nu),
                 GridSpec(h0))   # geometry here is unused: the embedding is given
-    model = BodyModel.build(body, emb, [], Discretization(ghost_gamma=gamma))
+    options = SolverOptions(ghost_penalty=gamma, outer_passes=40, outer_tol=1e-8, linear=linear)
+    model = BodyModel.build(body, emb, [], options, finite=False)
     el, space = model.elasticity, model.space
     mu, lam = el.mu, el.lam
     model.load[:] = body_force_load(space, el.points, lambda x, y, z: field.body_force(np.stack([x, y, z], -1), mu, lam))
@@ -84,7 +85,7 @@ def solve_manufactured(solid, field: CubicField, h0: float, level: int, offset, 
     comps = tuple((i, (lambda i: lambda x, y, z: field.value(np.stack([x, y, z], -1))[:, i])(i)) for i in range(3))
     model.dirichlet.append(WeakDirichlet.build("all", space, model.pattern, surface, comps,
                                                10.0 * E / space.h))
-    result = solve_static(System([model]), 1, StaticOptions(outer_passes=40, outer_tol=1e-8, linear=linear))
+    result = solve_static(System([model]), 1, options)
     assert result.status == "converged", result.message
     step = result.steps[-1]
     u = step.u[0]

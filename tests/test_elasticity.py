@@ -16,17 +16,14 @@ from cgfem.geometry.specs import SphereSpec
 from cgfem.run import build_models
 from cgfem.solve.linear import rigid_body_modes
 from cgfem.solve.newton import observed_order
-from cgfem.solve.static import StaticOptions, System, solve_static
+from cgfem.solve.static import System, solve_static
 from elasticity_cases import box_case, uniform_stress_case
 
 
 def _solve(case, level=0, surface="nurbs_fe"):
     models, _ = build_models(case, level, surface, lambda m: None)
     system = System(models)
-    s = case.solver
-    options = StaticOptions(newton_tol=s.newton_tol, max_newton=s.max_newton, outer_passes=s.outer_passes,
-                            outer_tol=s.outer_tol, max_cutbacks=s.max_cutbacks, linear=s.linear)
-    return system, solve_static(system, case.steps, options)
+    return system, solve_static(system, case.steps, case.solver)
 
 
 @pytest.fixture(scope="module")
@@ -192,3 +189,16 @@ def test_reactions_balance_body_force_and_tractions_exactly():
     # resultants over the unit box: body force (0, 3e3, -7.8e4 * 1.5), traction (0.5e4, 0, -2e4/3)
     loads = np.array([0.5e4, 3e3, -7.8e4 * 1.5 - 2e4 / 3])
     assert np.allclose(reaction, -loads, rtol=0, atol=1e-9 * np.abs(loads).max())
+
+
+def test_reference_matrix_equals_the_independent_voigt_brick():
+    """Our tensor-form element kernel against the Voigt B^T D B brick of the solver fixture."""
+    import elasticity_fixture as fx
+    from cgfem.fem._material_kernels import LINEAR_ELASTIC, tangent_batch
+
+    E, nu, h = 2.5, 0.27, 0.4
+    lam, mu = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+    A = tangent_batch(LINEAR_ELASTIC, np.zeros((1, 3, 3)), mu, lam)[2][0]
+    ke = reference_matrix(A, h)
+    assert np.abs(ke - fx.brick_stiffness(h, E, nu)).max() < 1e-14 * np.abs(ke).max()
+

@@ -159,3 +159,4 @@ def test_uniform_stress_run_reports_its_von_mises_and_reactions(tmp_path):
     mesh = meshio.read(tmp_path / "step_001.vtu")
     assert np.allclose(mesh.point_data["von_mises"], vm, rtol=1e-8)
     assert np.allclose(mesh.point_data["stress"], sigma.ravel(), rtol=0, atol=1e-8 * vm)
+

@@ -22,6 +22,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from cgfem import __version__
+from cgfem.case.model import SURFACES
 from cgfem.errors import InputError
 
 EXIT_OK = 0
@@ -29,8 +30,6 @@ EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
 
 
-#: contact surface definitions (DESIGN.md) and the quadrature each one integrates on
-SURFACES = {"facets": "facets", "nurbs_fe": "nurbs", "nurbs_fit": "nurbs"}
 
 
 @dataclass(frozen=True)
@@ -102,15 +101,14 @@ def check_case(path: str, level: int | None = None, surface: str = "nurbs_fe",
 
 
 def _embed_report(solid, body, level: int, surface: str, vtu: str | None) -> GridReport:
-    from cgfem.embedding.quadrature import embed, grid_for
+    from cgfem.run import embed_body
 
-    grid = grid_for(solid, body.grid.h0, level, body.grid.offset)
-    emb = embed(solid, grid, SURFACES[surface])
+    emb = embed_body(solid, body, level, surface)
     if vtu is not None:
         from cgfem.embedding.export import write_embedding_vtu
 
         write_embedding_vtu(emb, vtu, f"{body.name}_L{level}_{surface}")
-    return GridReport(level, surface, grid.h, emb.counts(), float(emb.volume.w.sum()),
+    return GridReport(level, surface, emb.grid.h, emb.counts(), float(emb.volume.w.sum()),
                       emb.area_by_name())
 
 

@@ -14,7 +14,7 @@ import meshio
 import numpy as np
 
 from cgfem.atomic import write_text_atomic
-from cgfem.embedding.export import active_hex_mesh, write_vtu_files
+from cgfem.embedding.export import write_vtu_files
 
 
 def write_json_atomic(path: Path, data: dict) -> Path:
@@ -41,14 +41,14 @@ def clear_previous(folder: Path) -> None:
 def step_mesh(bodies: list[dict]) -> meshio.Mesh:
     """One hexahedral mesh holding the active elements of every body.
 
-    ``bodies``: dicts with ``grid``, ``elements`` (grid ids), nodal ``displacement`` (n, 3),
+    ``bodies``: dicts with node ``points`` (n, 3), H8 ``cells`` (m, 8), nodal ``displacement`` (n, 3),
     nodal ``stress`` (n, 3, 3, Cauchy, recovered), nodal ``von_mises`` (n,), per-element
     ``status`` (m,) and ``element_von_mises`` (m,).
     """
     points, cells, point_data, cell_data = [], [], {}, {}
     shift = 0
     for index, b in enumerate(bodies):
-        x, c = active_hex_mesh(b["grid"], b["elements"])
+        x, c = b["points"], b["cells"]
         points.append(x)
         cells.append(c + shift)
         shift += x.shape[0]

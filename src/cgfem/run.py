@@ -17,20 +17,17 @@ from typing import Callable
 import numpy as np
 
 from cgfem import __version__
-from cgfem.case.model import Case
-from cgfem.embedding.quadrature import embed, grid_for
+from cgfem.case.model import SURFACES, Body, Case
+from cgfem.embedding.quadrature import Embedding, embed, grid_for
 from cgfem.errors import InputError
-from cgfem.fem.body import BodyModel, Discretization, boundary_of
+from cgfem.fem.body import BodyModel, boundary_of
 from cgfem.fem.materials import von_mises
 from cgfem.fem import spr
 from cgfem.fem.spr import energy_norm, zz_estimate
 from cgfem.geometry.builders import build_solid
 from cgfem.geometry.measure import areas_by_name, volume
 from cgfem.results import clear_previous, write_json_atomic, write_step
-from cgfem.solve.static import StaticOptions, StepRecord, System, solve_static
-
-#: surface definition -> quadrature of the embedding
-SURFACES = {"facets": "facets", "nurbs_fe": "nurbs", "nurbs_fit": "nurbs"}
+from cgfem.solve.static import StepRecord, System, solve_static
 
 #: bytes per inside and per cut element: pattern scatter map, quadrature, tangent data and
 #: the factorization's fill. Calibrated on the Neo-Hookean half torus at level 3 (86k DOFs,
@@ -58,21 +55,27 @@ def available_memory() -> int:
     return 16 * 2**30
 
 
-def estimate_memory(case: Case, level: int, solids: dict) -> tuple[int, int]:
-    """Estimated bytes and DOFs of ``case`` at ``level`` from the B-rep measures: inside
-    elements ~ V / h^3, cut elements ~ 2 A / h^2."""
+def brep_measures(solid) -> tuple[float, float]:
+    """B-rep volume and total area of ``solid``."""
+    return volume(solid), float(sum(areas_by_name(solid).values()))
+
+
+def estimate_memory(case: Case, level: int, measures: dict[str, tuple[float, float]]) -> tuple[int, int]:
+    """Estimated bytes and DOFs of ``case`` at ``level`` from the B-rep volume and area of
+    every body (``measures``): inside elements ~ V / h^3, cut elements ~ 2 A / h^2."""
     total, dofs = 0, 0
     for body in case.bodies:
         h = body.grid.h(level)
-        v, a = volume(solids[body.name]), sum(areas_by_name(solids[body.name]).values())
+        v, a = measures[body.name]
         inside, cut = v / h**3, 2.0 * a / h**2
         total += int(BYTES_PER_ELEMENT * inside + BYTES_PER_CUT_ELEMENT * cut)
         dofs += int(3 * (inside + cut))
     return total, dofs
 
 
-def check_memory(case: Case, level: int, solids: dict, available: int | None = None) -> None:
-    need, dofs = estimate_memory(case, level, solids)
+def check_memory(case: Case, level: int, measures: dict[str, tuple[float, float]],
+                 available: int | None = None) -> None:
+    need, dofs = estimate_memory(case, level, measures)
     have = available_memory() if available is None else available
     if need > have:
         raise InputError("--level", f"level {level} needs about {_size(need)} "
@@ -88,16 +91,9 @@ def _size(n_bytes: float) -> str:
     return f"{n_bytes / 1024.0:.1f} EiB"
 
 
-def discretization_of(case: Case) -> Discretization:
-    s = case.solver
-    return Discretization(kappa_dirichlet=s.kappa_dirichlet, ghost_gamma=s.ghost_penalty,
-                          finite=case.kinematics == "finite")
-
-
-def static_options(case: Case) -> StaticOptions:
-    s = case.solver
-    return StaticOptions(newton_tol=s.newton_tol, max_newton=s.max_newton, outer_passes=s.outer_passes,
-                         outer_tol=s.outer_tol, max_cutbacks=s.max_cutbacks, linear=s.linear)
+def embed_body(solid, body: Body, level: int, surface: str) -> Embedding:
+    """``body`` embedded in its grid of ``level`` with the quadrature of ``surface``."""
+    return embed(solid, grid_for(solid, body.grid.h0, level, body.grid.offset), SURFACES[surface])
 
 
 def build_models(case: Case, level: int, surface: str, log: Callable[[str], None]) -> tuple[list, dict]:
@@ -105,30 +101,32 @@ def build_models(case: Case, level: int, surface: str, log: Callable[[str], None
     if case.contact:
         raise InputError("contact", "contact pairs are not implemented yet in `cgfem run`")
     solids = {b.name: build_solid(b.geometry) for b in case.bodies}
-    check_memory(case, level, solids)
-    options = discretization_of(case)
+    brep = {name: brep_measures(solid) for name, solid in solids.items()}
+    check_memory(case, level, brep)
+    finite = case.kinematics == "finite"
     models, measures = [], {}
     for body in case.bodies:
         tic = time.perf_counter()
-        solid = solids[body.name]
-        emb = embed(solid, grid_for(solid, body.grid.h0, level, body.grid.offset), SURFACES[surface])
-        model = BodyModel.build(body, emb, boundary_of(case, body.name), options)
+        emb = embed_body(solids[body.name], body, level, surface)
+        model = BodyModel.build(body, emb, boundary_of(case, body.name), case.solver, finite)
         models.append(model)
         measures[body.name] = {
             "nodes": model.space.n_nodes, "dofs": model.n_dofs,
             "elements": {k: v for k, v in emb.counts().items() if k in ("inside", "cut")},
             "h": model.space.h,
             "volume": float(emb.volume.w.sum()), "area": float(emb.surface.w.sum()),
-            "brep_volume": volume(solid), "brep_area": float(sum(areas_by_name(solid).values()))}
+            "brep_volume": brep[body.name][0], "brep_area": brep[body.name][1]}
         log(f"body {body.name}: {model.space.n_nodes} nodes, {model.n_dofs} dofs, "
             f"{int(model.space.cut.sum())} cut elements ({time.perf_counter() - tic:.2f} s)")
     return models, measures
 
 
-def step_outputs(model: BodyModel, u: np.ndarray) -> dict:
-    """Nodal fields for the VTU file and scalars for the summary of one body at one step."""
+def step_outputs(model: BodyModel, u: np.ndarray, recovered: np.ndarray) -> dict:
+    """Nodal fields for the VTU file and scalars for the summary of one body at one step;
+    ``recovered`` is the solver's recovery of ``u`` (the Cauchy stress in small strain)."""
     space, el = model.space, model.elasticity
-    nodal_cauchy = spr.recover(model.recovery, model.cauchy(u, model.sampling_points()))
+    nodal_cauchy = (spr.recover(model.recovery, model.cauchy(u, model.sampling_points()))
+                    if model.finite else recovered)
     vm_nodes = von_mises(nodal_cauchy)
     vol = el.points
     sigma_h = model.cauchy(u)
@@ -145,7 +143,7 @@ def step_outputs(model: BodyModel, u: np.ndarray) -> dict:
     eta, _ = zz_estimate(space, vol, sigma_h, at_points, el.mu, el.lam)
     norm = energy_norm(vol, sigma_h, el.mu, el.lam)
     status = np.where(space.cut, 2, 1)
-    return {"grid": space.grid, "elements": space.elements, "displacement": u.reshape(-1, 3),
+    return {"points": space.coordinates, "cells": space.connectivity, "displacement": u.reshape(-1, 3),
             "stress": nodal_cauchy, "von_mises": vm_nodes, "status": status,
             "element_von_mises": per_element, "max_von_mises": float(per_element.max(initial=0.0)),
             "error_estimate": float(eta), "energy_norm": float(norm)}
@@ -168,7 +166,7 @@ def run_case(case: Case, level: int, surface: str, out: Path,
     steps: list[dict] = []
 
     def on_step(record: StepRecord) -> None:
-        outputs = [step_outputs(m, u) for m, u in zip(models, record.u)]
+        outputs = [step_outputs(m, u, s) for m, u, s in zip(models, record.u, record.recovered)]
         write_step(out, len(steps) + 1, outputs)
         reactions = {}
         for m, u, s in zip(models, record.u, record.stress):
@@ -185,7 +183,7 @@ def run_case(case: Case, level: int, surface: str, out: Path,
         log(f"step {len(steps)} converged at load factor {record.load_factor:.4g} "
             f"({record.outer_passes} outer passes, {record.seconds:.2f} s)")
 
-    result = solve_static(system, case.steps, static_options(case), log, on_step)
+    result = solve_static(system, case.steps, case.solver, log, on_step)
     summary = {"case": case.name, "level": level, "surface": surface, "status": result.status,
                "message": result.message, "kinematics": case.kinematics, "bodies": measures,
                "steps": steps,

@@ -24,6 +24,7 @@ __all__ = [
     "KINEMATICS",
     "LINEAR_SOLVERS",
     "MATERIAL_MODELS",
+    "SURFACES",
     "Body",
     "BoundaryCondition",
     "Case",
@@ -38,6 +39,8 @@ __all__ = [
 KINEMATICS = ("small", "finite")
 MATERIAL_MODELS = ("linear_elastic", "neo_hookean")
 LINEAR_SOLVERS = ("auto", "superlu", "pyamg", "pardiso")
+#: contact surface definitions (DESIGN.md) and the boundary quadrature each one integrates on
+SURFACES = {"facets": "facets", "nurbs_fe": "nurbs", "nurbs_fit": "nurbs"}
 #: pattern of a body name
 BODY_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 #: load steps when the case file does not say
@@ -274,6 +277,11 @@ class Case:
         for i, name in enumerate(names):
             if name in names[:i]:
                 raise InputError(f"bodies.{name}", "duplicate body name")
+        if self.kinematics == "finite":
+            for body in self.bodies:
+                if body.material.model != "neo_hookean":
+                    raise InputError(f"bodies.{body.name}.material.model", "finite kinematics need "
+                                     f"neo_hookean, got {body.material.model!r}")
         for i, bc in enumerate(self.boundary):
             require_body(names, bc.body, f"boundary[{i}].body")
         for i, pair in enumerate(self.contact):

@@ -13,30 +13,17 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from cgfem.case.model import Body, Case, DisplacementBC, TractionBC
+from cgfem.case.model import Body, Case, DisplacementBC, SolverOptions, TractionBC
 from cgfem.embedding.quadrature import Embedding
 from cgfem.fem import spr
 from cgfem.fem._material_kernels import LINEAR_ELASTIC, NEO_HOOKEAN, cauchy_batch
+from cgfem.fem.materials import model_id
 from cgfem.fem.assembly import Pattern, build_pattern
 from cgfem.fem.boundary import (BoundaryPoints, WeakDirichlet, body_force_load, surface_mask,
                                 traction_load)
 from cgfem.fem.elasticity import Elasticity
 from cgfem.fem.ghost import ghost_penalty
 from cgfem.fem.space import ElementPoints, Space
-
-
-@dataclass(frozen=True)
-class Discretization:
-    """Numerical parameters of the bulk and boundary terms.
-
-    kappa_dirichlet : weak-Dirichlet penalty ``beta = kappa E / h``
-    ghost_gamma : ghost-penalty parameter (0 switches it off)
-    finite : total Lagrangian finite strain (else small strain)
-    """
-
-    kappa_dirichlet: float = 10.0
-    ghost_gamma: float = 0.05
-    finite: bool = False
 
 
 @dataclass
@@ -50,25 +37,25 @@ class BodyModel:
     dirichlet: list[WeakDirichlet]
     load: np.ndarray                 # (n_dofs,) dead loads at load factor 1
     recovery: spr.Recovery
-    E: float
     _ghost_pos: np.ndarray | None = field(default=None, repr=False)
     _boundary: BoundaryPoints | None = field(default=None, repr=False)
+    _samples: ElementPoints | None = field(default=None, repr=False)
 
     @classmethod
-    def build(cls, body: Body, embedding: Embedding, boundary: list, options: Discretization) -> "BodyModel":
+    def build(cls, body: Body, embedding: Embedding, boundary: list, options: SolverOptions,
+              finite: bool) -> "BodyModel":
         """The model of ``body`` on ``embedding`` with the case's ``boundary`` entries that
-        name it (each a :class:`DisplacementBC` or :class:`TractionBC`)."""
+        name it (each a :class:`DisplacementBC` or :class:`TractionBC`); ``options`` gives
+        the weak-Dirichlet and ghost-penalty parameters. In small strain every material is
+        its linearization (linear elastic with the same E and nu)."""
         space = Space.from_embedding(embedding)
         lam, mu = body.material.lame()
-        model = NEO_HOOKEAN if (options.finite and body.material.model == "neo_hookean") else LINEAR_ELASTIC
-        if options.finite and model == LINEAR_ELASTIC:
-            raise ValueError("finite strain needs neo_hookean materials")
-        G, extra = ghost_penalty(space, options.ghost_gamma, lam + 2.0 * mu)
+        model = model_id(body.material.model) if finite else LINEAR_ELASTIC
+        G, extra = ghost_penalty(space, options.ghost_penalty, lam + 2.0 * mu)
         pattern = build_pattern(space, extra)
         volume = space.volume_points(embedding)
         elasticity = Elasticity(space, pattern, volume, model, mu, lam)
-        E = body.material.E
-        beta = options.kappa_dirichlet * E / space.h
+        beta = options.kappa_dirichlet * body.material.E / space.h
         load = np.zeros(space.n_dofs)
         if body.body_force is not None:
             load += body_force_load(space, volume, body.body_force)
@@ -81,8 +68,8 @@ class BodyModel:
                 dirichlet.append(WeakDirichlet.build(label, space, pattern, points, bc.components, beta))
             elif isinstance(bc, TractionBC):
                 load += traction_load(space, points, bc.value)
-        recovery = spr.build_recovery(space, embedding)
-        return cls(body.name, space, embedding, pattern, elasticity, G, dirichlet, load, recovery, E)
+        return cls(body.name, space, embedding, pattern, elasticity, G, dirichlet, load,
+                   spr.build_recovery(space))
 
     @property
     def n_dofs(self) -> int:
@@ -119,8 +106,10 @@ class BodyModel:
         return spr.recover(self.recovery, self.elasticity.stress(u, self.sampling_points()))
 
     def sampling_points(self) -> ElementPoints:
-        """The SPR sampling points of the space."""
-        return self.space.points_at(*spr.sampling_points(self.space))
+        """The SPR sampling points of the space (built once)."""
+        if self._samples is None:
+            self._samples = self.space.points_at(*spr.sampling_points(self.space))
+        return self._samples
 
     @property
     def boundary_points(self) -> BoundaryPoints:

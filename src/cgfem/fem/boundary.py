@@ -41,21 +41,9 @@ class BoundaryPoints:
 
     @classmethod
     def of(cls, space: Space, surface: SurfaceQuadrature, mask: np.ndarray) -> "BoundaryPoints":
-        slots = space.slot(surface.element[mask])
-        if np.any(slots < 0):
-            raise ValueError("surface points in inactive elements")
-        order = np.argsort(slots, kind="stable")
-        slots = slots[order]
-        x = surface.x[mask][order]
-        counts = np.bincount(slots, minlength=space.n_elements)
-        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-        xi = space.local(x, slots)
-        pts = ElementPoints(xi, x, surface.w[mask][order], offsets)
-        return cls(pts, surface.normal[mask][order], slots)
-
-    @property
-    def area(self) -> float:
-        return float(self.points.w.sum())
+        """The rows ``mask`` of the boundary rule ``surface``."""
+        points, order, slots = space.group(surface.x[mask], surface.w[mask], surface.element[mask])
+        return cls(points, surface.normal[mask][order], slots)
 
     def interpolate(self, space: Space, nodal: np.ndarray) -> np.ndarray:
         """Values (n, ...) at the points of a nodal field (n_nodes, ...)."""

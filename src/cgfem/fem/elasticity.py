@@ -57,11 +57,6 @@ class Elasticity:
         """Stress ``P`` (n, 3, 3) at ``points``: Cauchy (small strain) or first Piola-Kirchhoff."""
         return stress_batch(self.model, self.gradients(u, points), self.mu, self.lam)[1]
 
-    def energy(self, u: np.ndarray) -> float:
-        """Strain energy (J); ``inf`` where a point is inverted (J <= 0)."""
-        W = stress_batch(self.model, self.gradients(u), self.mu, self.lam)[0]
-        return float(np.dot(W, self.points.w))
-
     def add(self, u: np.ndarray, r: np.ndarray, data: np.ndarray | None) -> None:
         """Add the internal force to ``r`` and, if ``data`` is given, the tangent to it."""
         if self.linear:
@@ -99,8 +94,7 @@ class Elasticity:
         zero = np.zeros((1, 3, 3))
         A = tangent_batch(self.model, zero, self.mu, self.lam)[2]
         ke = reference_matrix(A[0], h)
-        cut = np.zeros(space.n_elements, bool)
-        cut[space.cut] = True
+        cut = space.cut
         for elements in pat.colours:
             inner = elements[~cut[elements]]
             kern.scatter_reference(ke, inner, pat.scatter, data)

@@ -26,10 +26,6 @@ import scipy.sparse as sp
 
 from cgfem.fem.space import NODE_XI, Space
 
-#: default ghost-penalty parameter gamma
-DEFAULT_GAMMA = 0.05
-
-
 def face_pairs(space: Space) -> tuple[np.ndarray, np.ndarray]:
     """Pairs of active elements sharing a face with at least one of them cut.
 

@@ -1,4 +1,4 @@
-"""Constitutive laws at material points: Lamé parameters, model ids, batched stress
+"""Constitutive laws at material points: Lamé parameters in kernel order, model ids, batched stress
 evaluation and the closed-form uniaxial Neo-Hookean reference.
 
 The laws themselves are the numba kernels of :mod:`cgfem.fem._material_kernels`
@@ -13,6 +13,7 @@ import math
 import numpy as np
 from scipy.optimize import brentq
 
+from cgfem.case.model import Material
 from cgfem.errors import InputError
 from cgfem.fem import _material_kernels as _k
 from cgfem.fem._material_kernels import LINEAR_ELASTIC, NEO_HOOKEAN, stress_tangent
@@ -35,20 +36,9 @@ MODEL_IDS: dict[str, int] = {"linear_elastic": LINEAR_ELASTIC, "neo_hookean": NE
 
 
 def lame(E: float, nu: float) -> tuple[float, float]:
-    """Lamé parameters ``(mu, lam)`` of Young's modulus ``E`` and Poisson's ratio ``nu``:
-    ``mu = E / (2 (1 + nu))``, ``lam = E nu / ((1 + nu)(1 - 2 nu))`` (3D / plane strain).
-
-    Note the order ``(mu, lam)``, the order of the kernel arguments (it is the reverse of
-    :meth:`cgfem.case.model.Material.lame`).
-    """
-    E = float(E)
-    nu = float(nu)
-    if not (math.isfinite(E) and E > 0.0):
-        raise InputError("E", f"must be a finite number > 0, got {E!r}")
-    if not -1.0 < nu < 0.5:
-        raise InputError("nu", f"must be in (-1, 0.5), got {nu!r}")
-    mu = E / (2.0 * (1.0 + nu))
-    lam = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+    """Lamé parameters ``(mu, lam)`` (the kernels' argument order) of ``E`` and ``nu``,
+    validated like a case file's material (:meth:`cgfem.case.model.Material.lame`)."""
+    lam, mu = Material("linear_elastic", E, nu).lame()
     return mu, lam
 
 

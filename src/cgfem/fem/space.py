@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cgfem.embedding.export import active_hex_mesh
 from cgfem.embedding.grid import CartesianGrid
 from cgfem.embedding.quadrature import CUT, Embedding
 
@@ -42,22 +43,12 @@ class ElementPoints:
         """(n,) active element of every point."""
         return np.repeat(np.arange(self.offsets.size - 1), np.diff(self.offsets))
 
-    def select(self, elements: np.ndarray) -> "ElementPoints":
-        """The points of the listed active elements only (the others keep empty ranges)."""
-        keep = np.zeros(self.offsets.size - 1, bool)
-        keep[elements] = True
-        mask = keep[self.element]
-        counts = np.where(keep, np.diff(self.offsets), 0)
-        return ElementPoints(self.xi[mask], self.x[mask], self.w[mask],
-                             np.concatenate([[0], np.cumsum(counts)]).astype(np.int64))
-
 
 @dataclass(frozen=True)
 class Space:
     """H8 field over the active elements of a grid.
 
     elements : (n_elements,) grid ids of the active elements, ascending
-    nodes : (n_nodes,) grid ids of their nodes, ascending
     connectivity : (n_elements, 8) compact node numbers, H8 order
     coordinates : (n_nodes, 3) node positions
     cut : (n_elements,) bool, element cut by the boundary
@@ -65,22 +56,21 @@ class Space:
 
     grid: CartesianGrid
     elements: np.ndarray
-    nodes: np.ndarray
     connectivity: np.ndarray
     coordinates: np.ndarray
     cut: np.ndarray
 
     @classmethod
+    def of_elements(cls, grid: CartesianGrid, elements: np.ndarray, cut: np.ndarray) -> "Space":
+        """The space on the grid elements ``elements`` (ascending ids); nodes are numbered
+        in ascending grid id, as in the VTU meshes of :func:`active_hex_mesh`."""
+        coordinates, connectivity = active_hex_mesh(grid, elements)
+        return cls(grid, np.asarray(elements, np.int64), connectivity, coordinates, np.asarray(cut, bool))
+
+    @classmethod
     def from_embedding(cls, embedding: Embedding) -> "Space":
-        grid = embedding.grid
         elements = embedding.active_elements
-        grid_nodes = grid.element_nodes(elements)
-        nodes, connectivity = np.unique(grid_nodes, return_inverse=True)
-        connectivity = connectivity.reshape(-1, 8).astype(np.int64)
-        ny, nz = grid.node_shape[1], grid.node_shape[2]
-        ijk = np.stack([nodes // (ny * nz), (nodes // nz) % ny, nodes % nz], axis=-1)
-        return cls(grid, elements, nodes, connectivity, grid.node_coordinates(ijk),
-                   embedding.status[elements] == CUT)
+        return cls.of_elements(embedding.grid, elements, embedding.status[elements] == CUT)
 
     @property
     def n_elements(self) -> int:
@@ -88,7 +78,7 @@ class Space:
 
     @property
     def n_nodes(self) -> int:
-        return int(self.nodes.size)
+        return int(self.coordinates.shape[0])
 
     @property
     def n_dofs(self) -> int:
@@ -118,18 +108,25 @@ class Space:
         """Local coordinates (n, 3) of points ``x`` in active elements ``slots``."""
         return (np.asarray(x, float) - self.centres()[slots]) / (0.5 * self.h)
 
-    def group(self, x: np.ndarray, w: np.ndarray, grid_elements: np.ndarray) -> ElementPoints:
-        """Regroup points (x, w, owning grid element) by active element; points of inactive
-        elements are an error (the embedding's rules only hold active elements)."""
+    def offsets(self, slots: np.ndarray) -> np.ndarray:
+        """Point ranges (n_elements + 1,) of points sorted by active element ``slots``."""
+        counts = np.bincount(slots, minlength=self.n_elements)
+        return np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+
+    def group(self, x: np.ndarray, w: np.ndarray, grid_elements: np.ndarray
+              ) -> tuple[ElementPoints, np.ndarray, np.ndarray]:
+        """Regroup points (x, w, owning grid element) by active element. Returns the grouped
+        points, the permutation applied (to carry further per-point data along) and the
+        active element of every grouped point. Points of inactive elements are an error (the
+        embedding's rules only hold active elements)."""
         slots = self.slot(grid_elements)
         if np.any(slots < 0):
             raise ValueError("quadrature points in inactive elements")
         order = np.argsort(slots, kind="stable")
         slots = slots[order]
         x = np.asarray(x, float)[order]
-        counts = np.bincount(slots, minlength=self.n_elements)
-        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-        return ElementPoints(self.local(x, slots), x, np.asarray(w, float)[order], offsets)
+        points = ElementPoints(self.local(x, slots), x, np.asarray(w, float)[order], self.offsets(slots))
+        return points, order, slots
 
     def points_at(self, slots: np.ndarray, xi: np.ndarray) -> ElementPoints:
         """Points given by active element and local coordinates (sorted by element), with
@@ -137,14 +134,13 @@ class Space:
         slots = np.asarray(slots, np.int64)
         if np.any(np.diff(slots) < 0):
             raise ValueError("points must be sorted by element")
-        counts = np.bincount(slots, minlength=self.n_elements)
-        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        offsets = self.offsets(slots)
         xi = np.ascontiguousarray(xi, dtype=float)
         return ElementPoints(xi, self.centres()[slots] + 0.5 * self.h * xi, np.zeros(slots.size), offsets)
 
     def volume_points(self, embedding: Embedding) -> ElementPoints:
         rule = embedding.volume
-        return self.group(rule.x, rule.w, rule.element)
+        return self.group(rule.x, rule.w, rule.element)[0]
 
     def shape_values(self, xi: np.ndarray) -> np.ndarray:
         """H8 shape functions (n, 8) at local coordinates ``xi`` (n, 3)."""

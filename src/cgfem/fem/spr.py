@@ -48,7 +48,6 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from cgfem.embedding.quadrature import Embedding
 from cgfem.fem._spr_kernels import average_rows, patch_operators
 from cgfem.fem.space import ElementPoints, Space
 
@@ -94,21 +93,17 @@ def node_elements(space: Space) -> tuple[np.ndarray, np.ndarray]:
     return ptr.astype(np.int64), (order // 8).astype(np.int64)
 
 
-def build_recovery(space: Space, embedding: Embedding) -> Recovery:
-    """Per-node least-squares operators and their averaged sparse matrix for ``space``
-    (built from ``embedding``, which must be the same body on the same grid)."""
-    if embedding.grid != space.grid or not np.array_equal(embedding.active_elements,
-                                                          space.elements):
-        raise ValueError("the embedding is not the one of this space")
+def build_recovery(space: Space) -> Recovery:
+    """Per-node least-squares operators and their averaged sparse matrix for ``space``."""
     slots, xi = sampling_points(space)
-    x = space.centres()[slots] + 0.5 * space.h * xi
-    sample_ptr = np.concatenate([[0], np.cumsum(np.bincount(slots, minlength=space.n_elements))])
+    samples = space.points_at(slots, xi)
+    x, sample_ptr = samples.x, samples.offsets
     node_ptr, elements = node_elements(space)
     conn = np.ascontiguousarray(space.connectivity, np.int64)
     coords = np.ascontiguousarray(space.coordinates, float)
     h = float(space.h)
     row_ptr, cols, coef, level, linear = patch_operators(
-        conn, coords, node_ptr, elements, sample_ptr.astype(np.int64), x, h,
+        conn, coords, node_ptr, elements, sample_ptr, x, h,
         MAX_LEVEL, MAX_LEBESGUE, MIN_EIG)
     indptr, indices, data = average_rows(row_ptr, cols, coef, linear, coords, h, conn,
                                          node_ptr, elements, slots.size)

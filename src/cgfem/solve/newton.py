@@ -1,7 +1,7 @@
 """Newton-Raphson with a backtracking line search, every stage passed in as a function.
 
 ``assemble(u, tangent) -> (r, K)`` gives the residual and (if asked) the tangent;
-``solve(K, r) -> du`` solves ``K du = -r`` (or raises); ``log(iteration, residual)``
+``solve(K, r) -> du`` solves ``K du = -r`` (or raises); ``log(iteration, relative residual)``
 reports progress. The line search halves the step while the residual norm does not
 decrease enough (Armijo on ``|r|^2 / 2``) or the trial state is inadmissible (a NaN
 residual: an inverted element); close to the solution it takes the full Newton step, so
@@ -25,33 +25,32 @@ class NewtonResult:
     """Outcome of one Newton solve.
 
     residuals : residual norms, the first at the initial guess
+    reference : the force scale convergence was measured against
     reason : why it stopped ("converged", "max_iterations", "line_search", "nan", "linear_solver")
     """
 
     u: np.ndarray
     converged: bool
     residuals: list[float] = field(default_factory=list)
+    reference: float = 0.0
     reason: str = ""
-
-    @property
-    def iterations(self) -> int:
-        return max(len(self.residuals) - 1, 0)
 
 
 def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0: np.ndarray,
            solve: Callable[[object, np.ndarray], np.ndarray], *, tol: float, reference: float,
            max_iter: int, log: Callable[[int, float], None] | None = None,
            fixed_tangent: bool = False) -> NewtonResult:
-    """Solve ``r(u) = 0`` from ``u0`` until ``|r| <= tol * reference``. With
+    """Solve ``r(u) = 0`` from ``u0`` until ``|r| <= tol * max(reference, |r(u0)|)``. With
     ``fixed_tangent`` no tangent is assembled (``solve`` gets None and must use a
     factorization it kept: modified Newton)."""
     u = u0.copy()
     need = not fixed_tangent
     r, K = assemble(u, need)
     norm = float(np.linalg.norm(r))
-    result = NewtonResult(u, False, [norm])
+    reference = max(reference, norm)
+    result = NewtonResult(u, False, [norm], reference)
     if log:
-        log(0, norm)
+        log(0, norm / reference if reference > 0.0 else norm)
     if not np.isfinite(norm):
         result.reason = "nan"
         return result
@@ -61,7 +60,7 @@ def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0
             break
         try:
             du = solve(K, -r)
-        except (RuntimeError, ValueError) as err:
+        except RuntimeError as err:   # LinearSolverError: singular, no convergence, NaN
             result.reason = f"linear_solver: {err}"
             return result
         step, trial = 1.0, None
@@ -83,10 +82,7 @@ def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0
         result.u = u
         result.residuals.append(norm)
         if log:
-            log(it, norm)
-        if not np.isfinite(norm):
-            result.reason = "nan"
-            return result
+            log(it, norm / reference)
     else:
         if norm <= tol * reference:
             result.converged, result.reason = True, "converged"

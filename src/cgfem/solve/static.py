@@ -19,21 +19,10 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
+from cgfem.case.model import SolverOptions
 from cgfem.fem.body import BodyModel
-from cgfem.solve.linear import LinearSolverError, factorize, rigid_body_modes
+from cgfem.solve.linear import factorize, rigid_body_modes
 from cgfem.solve.newton import newton
-
-
-@dataclass(frozen=True)
-class StaticOptions:
-    """Solver controls (from the case's ``solver`` entry)."""
-
-    newton_tol: float = 1e-9
-    max_newton: int = 30
-    outer_passes: int = 4
-    outer_tol: float = 1e-6
-    max_cutbacks: int = 5
-    linear: str = "auto"
 
 
 @dataclass
@@ -114,27 +103,20 @@ class System:
 
 class _Solver:
     """Linear solves with the factorization kept while the matrix object is unchanged, or
-    while ``frozen`` (modified Newton: the last factorization serves for a new matrix)."""
+    while ``frozen`` (modified Newton: the last factorization serves for a new matrix).
+    Failures raise :class:`~cgfem.solve.linear.LinearSolverError`, which Newton reports."""
 
     def __init__(self, backend: str, near_null: np.ndarray, symmetric: bool = True):
         self.backend, self.near_null, self.symmetric = backend, near_null, symmetric
         self._key, self._factor = None, None
         self.frozen = False
-        self.info: list[dict] = []
 
     def __call__(self, K: sp.csr_matrix, b: np.ndarray) -> np.ndarray:
         if self._key is not K and not (self.frozen and self._factor is not None):
-            try:
-                self._factor = factorize(K, backend=self.backend, symmetric=self.symmetric,
-                                         near_null=self.near_null)
-            except LinearSolverError as err:
-                raise RuntimeError(str(err)) from err
+            self._factor = factorize(K, backend=self.backend, symmetric=self.symmetric,
+                                     near_null=self.near_null)
             self._key = K
-            self.info.append(self._factor.info)
-        try:
-            return self._factor.solve(b)
-        except LinearSolverError as err:
-            raise RuntimeError(str(err)) from err
+        return self._factor.solve(b)
 
 
 def relative_change(new: list[np.ndarray], old: list[np.ndarray | None]) -> float:
@@ -149,7 +131,7 @@ Log = Callable[[str], None]
 MODIFIED_NEWTON_ITERATIONS = 6
 
 
-def solve_static(system: System, steps: int, options: StaticOptions, log: Log | None = None,
+def solve_static(system: System, steps: int, options: SolverOptions, log: Log | None = None,
                  on_step: Callable[[StepRecord], None] | None = None) -> StaticResult:
     """Run the load steps; ``on_step`` is called after every converged (sub)step."""
     log = log or (lambda message: None)
@@ -183,22 +165,20 @@ def solve_static(system: System, steps: int, options: StaticOptions, log: Log | 
 
 
 def _solve_increment(system: System, solver: _Solver, u0: np.ndarray, stress0: list, t: float,
-                     options: StaticOptions, log: Log):
+                     options: SolverOptions, log: Log):
     """Outer loop at load factor ``t``: (u, stress used by the last solve, stress recovered
     from u, Newton residuals per pass, stress changes per pass); None when Newton fails."""
     u, stress = u0, list(stress0)
     changes: list[float] = []
     residuals: list[list[float]] = []
-    reference = None
+    # the forces in play, which Newton's residual is measured against: the dead loads, the
+    # internal forces already carried and (Newton adds it) the first residual of the
+    # increment. A cut-back increment has a tiny residual, but round-off scales with the
+    # internal forces.
+    reference = max(system.load_norm(t), system.force_scale(u))
     for outer in range(1, options.outer_passes + 1):
         def assemble(v, tangent, stress=stress):
             return system.assemble(v, t, stress, tangent)
-        if reference is None:
-            # the forces in play: the first residual of the increment, the dead loads, the
-            # internal forces already carried (a cut-back increment has a tiny residual, but
-            # round-off scales with the internal forces)
-            r0 = np.linalg.norm(assemble(u, False)[0])
-            reference = max(float(r0), system.load_norm(t), system.force_scale(u)) or 1.0
         # later passes start close to the solution: modified Newton on the last
         # factorization first, a full Newton solve if that does not converge quickly
         attempts = [True, False] if outer > 1 and not system.linear else [False]
@@ -209,13 +189,14 @@ def _solve_increment(system: System, solver: _Solver, u0: np.ndarray, stress0: l
                             max_iter=MODIFIED_NEWTON_ITERATIONS if frozen else options.max_newton,
                             fixed_tangent=frozen,
                             log=lambda k, r: log(f"t={t:.4g} pass {outer} newton {k}: "
-                                                 f"|r|/ref={r / reference:.3e}  ({time.perf_counter() - tic:.2f} s)"))
+                                                 f"|r|/ref={r:.3e}  ({time.perf_counter() - tic:.2f} s)"))
             solver.frozen = False
             if result.converged:
                 break
         if not result.converged:
             log(f"t={t:.4g}: Newton stopped ({result.reason})")
             return None
+        reference = result.reference
         u = result.u
         residuals.append(result.residuals)
         used, stress = stress, system.recover(u)
