@@ -202,3 +202,34 @@ def test_reference_matrix_equals_the_independent_voigt_brick():
     ke = reference_matrix(A, h)
     assert np.abs(ke - fx.brick_stiffness(h, E, nu)).max() < 1e-14 * np.abs(ke).max()
 
+
+def test_cut_back_reaches_the_step_in_equal_sub_steps(monkeypatch):
+    """An increment that fails is halved until it succeeds; the rest of the step is then
+    taken in sub-steps of that size (not ever smaller ones)."""
+    import cgfem.solve.static as static
+    from cgfem.case.model import SolverOptions
+
+    class OneDof:
+        n_dofs, symmetric, bodies = 1, True, [None]
+
+        def split(self, u):
+            return [u]
+
+        def near_null(self):
+            return np.ones((1, 1))
+
+    taken = []
+
+    def increment(system, solver, u, stress, t, options, log):
+        if t - (taken[-1] if taken else 0.0) > 0.3:
+            return None                       # too large an increment: Newton fails
+        taken.append(t)
+        return u, stress, stress, [[1.0, 0.0]], [0.0]
+
+    monkeypatch.setattr(static, "_solve_increment", increment)
+    result = static.solve_static(OneDof(), 1, SolverOptions(max_cutbacks=2))
+    assert result.status == "converged"
+    assert taken == pytest.approx([0.25, 0.5, 0.75, 1.0])
+    taken.clear()
+    result = static.solve_static(OneDof(), 1, SolverOptions(max_cutbacks=1))
+    assert result.status == "failed" and taken == []

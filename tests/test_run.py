@@ -160,3 +160,13 @@ def test_uniform_stress_run_reports_its_von_mises_and_reactions(tmp_path):
     assert np.allclose(mesh.point_data["von_mises"], vm, rtol=1e-8)
     assert np.allclose(mesh.point_data["stress"], sigma.ravel(), rtol=0, atol=1e-8 * vm)
 
+
+def test_unavailable_linear_backend_is_bad_input(tmp_path, capsys, monkeypatch):
+    import cgfem.run
+
+    monkeypatch.setattr(cgfem.run, "available_backends", lambda: ("superlu", "pyamg"))
+    case = _write(tmp_path, LINK.replace("outer_passes: 6", "outer_passes: 6, linear: pardiso"))
+    code = main(["run", case, "--level", "0", "--surface", "facets", "--out", str(tmp_path / "o")])
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "solver.linear" in err[0] and "pardiso" in err[0]

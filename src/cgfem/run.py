@@ -27,6 +27,7 @@ from cgfem.fem.spr import energy_norm, zz_estimate
 from cgfem.geometry.builders import build_solid
 from cgfem.geometry.measure import areas_by_name, volume
 from cgfem.results import clear_previous, write_json_atomic, write_step
+from cgfem.solve.linear import available_backends
 from cgfem.solve.static import StepRecord, System, solve_static
 
 #: bytes per inside and per cut element: pattern scatter map, quadrature, tangent data and
@@ -156,6 +157,9 @@ def run_case(case: Case, level: int, surface: str, out: Path,
         raise InputError("--level", f"must be >= 0, got {level}")
     if surface not in SURFACES:
         raise InputError("--surface", f"must be one of {', '.join(SURFACES)}, got {surface!r}")
+    if case.solver.linear != "auto" and case.solver.linear not in available_backends():
+        raise InputError("solver.linear", f"backend {case.solver.linear!r} is not available here "
+                         f"(available: {', '.join(available_backends())})")
     started = time.perf_counter()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -21,7 +21,7 @@ import scipy.sparse as sp
 
 from cgfem.case.model import SolverOptions
 from cgfem.fem.body import BodyModel
-from cgfem.solve.linear import factorize, rigid_body_modes
+from cgfem.solve.linear import choose_backend, factorize, rigid_body_modes
 from cgfem.solve.newton import newton
 
 
@@ -133,18 +133,21 @@ MODIFIED_NEWTON_ITERATIONS = 6
 
 def solve_static(system: System, steps: int, options: SolverOptions, log: Log | None = None,
                  on_step: Callable[[StepRecord], None] | None = None) -> StaticResult:
-    """Run the load steps; ``on_step`` is called after every converged (sub)step."""
+    """Run the load steps; ``on_step`` is called after every converged (sub)step.
+
+    A step whose increment fails is reached in sub-steps of half the size (a quarter after
+    a second failure, ...), at most ``options.max_cutbacks`` halvings per step."""
     log = log or (lambda message: None)
+    choose_backend(system.n_dofs, system.symmetric, options.linear)   # ValueError if unusable
     solver = _Solver(options.linear, system.near_null(), system.symmetric)
     u = np.zeros(system.n_dofs)
     stress: list[np.ndarray | None] = [None] * len(system.bodies)
     t, records = 0.0, []
     for step in range(1, steps + 1):
         target = step / steps
-        cutbacks = 0
-        while t < target - 1e-14:
-            increment = (target - t) if cutbacks == 0 else (target - t) / 2.0 ** cutbacks
-            t_new = min(t + increment, target)
+        size, cutbacks = 1.0 / steps, 0
+        while t < target - 1e-12 * size:
+            t_new = target if target - t <= size * (1.0 + 1e-9) else t + size
             start = time.perf_counter()
             outcome = _solve_increment(system, solver, u, stress, t_new, options, log)
             if outcome is None:
@@ -152,7 +155,8 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
                 if cutbacks > options.max_cutbacks:
                     return StaticResult("failed", records, f"no convergence at load factor {t_new:.6g} "
                                         f"after {options.max_cutbacks} cut-backs")
-                log(f"cut-back {cutbacks}: increment halved")
+                size *= 0.5
+                log(f"cut-back {cutbacks}: load increment {size:.4g}")
                 continue
             u, used, stress, residuals, changes = outcome
             t = t_new
