@@ -47,7 +47,7 @@ class GridReport:
         return {"level": self.level, "surface": self.surface, "h": self.h, "volume": self.volume,
                 "area": sum(self.patch_areas.values()),
                 "elements": {"inside": self.counts["inside"], "cut": self.counts["cut"],
-                             "active": self.counts["active"]},
+                             "active": self.counts["active"], "moment_fitted": self.counts["fitted"]},
                 "nodes": self.counts["nodes"]}
 
 
@@ -121,7 +121,8 @@ def _format_table(reports: Sequence[BodyReport]) -> str:
         if g is not None:
             c = g.counts
             lines.append(f"  level {g.level} ({g.surface}), h = {g.h:.6g} m: {c['inside']} inside + "
-                         f"{c['cut']} cut elements, {c['nodes']} nodes; quadrature volume "
+                         f"{c['cut']} cut elements ({c['fitted']} with moment-fitted rules), "
+                         f"{c['nodes']} nodes; quadrature volume "
                          f"{g.volume:.12g} m^3 (relative error {g.volume / rep.brep_volume - 1:+.2e})")
         width = max(len(n) for n in rep.patch_areas)
         for name, area in rep.patch_areas.items():

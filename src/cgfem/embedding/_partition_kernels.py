@@ -18,9 +18,10 @@ integrands; only cells that reach ``max_depth`` (tangencies, measure zero) are i
 approximately and counted.
 
 Outputs per emitted surface point: local ``(s, t)``, position, area weight, unit normal and
-the grid element ``(i, j, k)``; per point of a trimming curve on a grid plane ``x = c``
-(needed for exact volume moments): position, length weight, ``m_y`` (the y component of the
-in-plane unit normal pointing out of the solid's section) and the plane index.
+the grid element ``(i, j, k)``; per point of a trimming curve on a grid plane ``x_k = c``
+of any axis ``k`` (needed for the exact volume rules of cut elements): position, length
+weight, the in-plane unit normal pointing out of the solid's section, the axis and the plane
+index.
 """
 
 from __future__ import annotations
@@ -113,18 +114,22 @@ def _emit_surface(pnet, s, t, weight, ijk, out_st, out_x, out_w, out_n, out_e, c
 
 
 @njit(cache=True)
-def _emit_trim(x, normal, tangent, weight, plane, s, t, trim_x, trim_w, trim_my, trim_plane, trim_st, counts):
-    """Append one point of a trimming curve on the grid plane ``x = origin + plane h``."""
+def _emit_trim(x, normal, tangent, weight, axis, plane, s, t, trim_x, trim_w, trim_m, trim_axis,
+               trim_plane, trim_st, counts):
+    """Append one point of a trimming curve on the grid plane ``x_axis = origin + plane h``;
+    its in-plane unit normal (out of the solid's section) is the surface normal without its
+    ``axis`` component, normalised."""
     i = counts[1]
     if i >= trim_w.shape[0]:
         counts[3] = 1
         return
     length = np.sqrt(tangent[0] ** 2 + tangent[1] ** 2 + tangent[2] ** 2)
-    norm_yz = np.sqrt(normal[1] ** 2 + normal[2] ** 2)
+    norm_in = np.sqrt(max(normal[0] ** 2 + normal[1] ** 2 + normal[2] ** 2 - normal[axis] ** 2, 0.0))
     for c in range(3):
         trim_x[i, c] = x[c]
+        trim_m[i, c] = 0.0 if (c == axis or norm_in == 0.0) else normal[c] / norm_in
     trim_w[i] = weight * length
-    trim_my[i] = normal[1] / norm_yz if norm_yz > 0.0 else 0.0
+    trim_axis[i] = axis
     trim_plane[i] = plane
     trim_st[i, 0] = s
     trim_st[i, 1] = t
@@ -151,10 +156,10 @@ def _emit_cell(pnet, sa, sb, ta, tb, origin, h, shape, GX, GW, rule,
 
 
 @njit(cache=True)
-def _curve_point(pnet, pn, c, sigma, ia, ib, swapped, icoef, x, xs, xt, tangent):
-    """Point, surface derivatives and tangent ``dX/d sigma`` of the curve ``x = c`` at the
+def _curve_point(pnet, pn, k, c, sigma, ia, ib, swapped, icoef, x, xs, xt, tangent):
+    """Point, surface derivatives and tangent ``dX/d sigma`` of the curve ``x_k = c`` at the
     outer coordinate ``sigma``; returns the local ``(s, t)``, or (-1, -1) if it has no root."""
-    r = _inner_root(pn, 0, c, sigma, ia, ib, icoef)
+    r = _inner_root(pn, k, c, sigma, ia, ib, icoef)
     if r < 0.0:
         return -1.0, -1.0
     s, t = _map_st(sigma, r, swapped)
@@ -165,22 +170,22 @@ def _curve_point(pnet, pn, c, sigma, ia, ib, swapped, icoef, x, xs, xt, tangent)
     else:
         xo = xs
         xi = xt
-    slope = -xo[0] / xi[0]
+    slope = -xo[k] / xi[k]
     for k in range(3):
         tangent[k] = xo[k] + xi[k] * slope
     return s, t
 
 
 @njit(cache=True)
-def _curve_length(pnet, pn, c, a, b, n, ia, ib, swapped, GX, GW, icoef):
-    """n-point Gauss estimate of the length of the curve ``x = c`` over ``[a, b]``."""
+def _curve_length(pnet, pn, k, c, a, b, n, ia, ib, swapped, GX, GW, icoef):
+    """n-point Gauss estimate of the length of the curve ``x_k = c`` over ``[a, b]``."""
     x = np.empty(3)
     xs = np.empty(3)
     xt = np.empty(3)
     tangent = np.empty(3)
     total = 0.0
     for g in range(n):
-        s, t = _curve_point(pnet, pn, c, a + GX[n, g] * (b - a), ia, ib, swapped, icoef, x, xs, xt, tangent)
+        s, t = _curve_point(pnet, pn, k, c, a + GX[n, g] * (b - a), ia, ib, swapped, icoef, x, xs, xt, tangent)
         if s >= 0.0:
             total += GW[n, g] * (b - a) * np.sqrt(tangent[0] ** 2 + tangent[1] ** 2 + tangent[2] ** 2)
     return total
@@ -200,9 +205,9 @@ def _push_halves(stack, depth, top, a, b, d):
 
 
 @njit(cache=True)
-def _trim_curve(pnet, pn, c, plane, x0, x1, ia, ib, swapped, GX, GW, rule, icoef,
-                trim_x, trim_w, trim_my, trim_plane, trim_st, counts):
-    """Quadrature of the trimming curve ``x = c`` over the outer interval ``[x0, x1]``:
+def _trim_curve(pnet, pn, k, c, plane, x0, x1, ia, ib, swapped, GX, GW, rule, icoef,
+                trim_x, trim_w, trim_m, trim_axis, trim_plane, trim_st, counts):
+    """Quadrature of the trimming curve ``x_k = c`` over the outer interval ``[x0, x1]``:
     Gauss rules on intervals halved until the length estimates of an interval and its two
     halves agree to ``CURVE_TOL_FACTOR`` times the tolerance (relative)."""
     log_tol = rule[0]
@@ -225,27 +230,27 @@ def _trim_curve(pnet, pn, c, plane, x0, x1, ia, ib, swapped, GX, GW, rule, icoef
         d = depth[top]
         n = max(gauss_order(b - a, log_tol, int(rule[1]), int(rule[2]) - 2), N_CURVE)
         if d < 48 and top + 2 <= 64 and b - a > MIN_INTERVAL:
-            coarse = _curve_length(pnet, pn, c, a, b, n, ia, ib, swapped, GX, GW, icoef)
-            fine = _curve_length(pnet, pn, c, a, b, n + 2, ia, ib, swapped, GX, GW, icoef)
+            coarse = _curve_length(pnet, pn, k, c, a, b, n, ia, ib, swapped, GX, GW, icoef)
+            fine = _curve_length(pnet, pn, k, c, a, b, n + 2, ia, ib, swapped, GX, GW, icoef)
             if abs(coarse - fine) > tol * abs(fine):
                 top = _push_halves(stack, depth, top, a, b, d)
                 continue
         n = n + 2
         for g in range(n):
-            s, t = _curve_point(pnet, pn, c, a + GX[n, g] * (b - a), ia, ib, swapped, icoef,
+            s, t = _curve_point(pnet, pn, k, c, a + GX[n, g] * (b - a), ia, ib, swapped, icoef,
                                 x, xs, xt, tangent)
             if s < 0.0:
                 continue
             _unit_cross(xs, xt, normal)
-            _emit_trim(x, normal, tangent, GW[n, g] * (b - a), plane, s, t,
-                       trim_x, trim_w, trim_my, trim_plane, trim_st, counts)
+            _emit_trim(x, normal, tangent, GW[n, g] * (b - a), k, plane, s, t,
+                       trim_x, trim_w, trim_m, trim_axis, trim_plane, trim_st, counts)
 
 
 @njit(cache=True)
 def _integrate_cell(pnet, pn, onet, oa, ob, ia, ib, swapped, fk, fc, fplane, kinds, nf,
                     origin, h, shape, GX, GW, rule,
                     out_st, out_x, out_w, out_n, out_e,
-                    trim_x, trim_w, trim_my, trim_plane, trim_st, counts):
+                    trim_x, trim_w, trim_m, trim_axis, trim_plane, trim_st, counts):
     """Iterated Gauss quadrature of a cell whose functions are all graphs over, or lines
     across, the outer direction (see the module docstring)."""
     po = onet.shape[0] - 1
@@ -380,22 +385,20 @@ def _integrate_cell(pnet, pn, onet, oa, ob, ia, ib, swapped, fk, fc, fplane, kin
                         s, t = _map_st(sigma, t0 + GX[ni, gg] * (t1 - t0), swapped)
                         _emit_surface(pnet, s, t, wsig * GW[ni, gg] * (t1 - t0), ijk,
                                       out_st, out_x, out_w, out_n, out_e, counts)
-        # trimming curves on planes x = const, each integrated adaptively
+        # trimming curves on the grid planes, each integrated adaptively
         x0 = allbp[iv]
         x1 = allbp[iv + 1]
         xm = 0.5 * (x0 + x1)
         for f in range(nf):
-            if fk[f] != 0 or kinds[f] != 1:
+            if kinds[f] != 1:
                 continue
-            if _inner_root(pn, 0, fc[f], xm, ia, ib, icoef) < 0.0:
+            if _inner_root(pn, fk[f], fc[f], xm, ia, ib, icoef) < 0.0:
                 continue
-            _trim_curve(pnet, pn, fc[f], fplane[f], x0, x1, ia, ib, swapped, GX, GW, rule, icoef,
-                        trim_x, trim_w, trim_my, trim_plane, trim_st, counts)
+            _trim_curve(pnet, pn, fk[f], fc[f], fplane[f], x0, x1, ia, ib, swapped, GX, GW, rule, icoef,
+                        trim_x, trim_w, trim_m, trim_axis, trim_plane, trim_st, counts)
     # trimming lines of planes constant along the inner direction
     for v in range(nv):
         f = vfunc[v]
-        if fk[f] != 0:
-            continue
         sigma = vroot[v]
         n = _line_segments(pn, fk, fc, kinds, nf, sigma, ia, ib, icoef, rts, rfs, seg)
         for sgi in range(n + 1):
@@ -409,8 +412,8 @@ def _integrate_cell(pnet, pn, onet, oa, ob, ia, ib, swapped, fk, fc, fplane, kin
                 point_derivs(pnet, s, t, x, xs, xt)
                 xi = xs if swapped else xt
                 _unit_cross(xs, xt, normal)
-                _emit_trim(x, normal, xi, GW[ni, gg] * (t1 - t0), fplane[f], s, t,
-                           trim_x, trim_w, trim_my, trim_plane, trim_st, counts)
+                _emit_trim(x, normal, xi, GW[ni, gg] * (t1 - t0), fk[f], fplane[f], s, t,
+                           trim_x, trim_w, trim_m, trim_axis, trim_plane, trim_st, counts)
 
 
 @njit(cache=True)
@@ -427,7 +430,7 @@ def _unit_cross(a, b, out):
 @njit(cache=True)
 def partition_piece(pnet, origin, h, shape, GX, GW, rule, max_depth,
                     out_st, out_x, out_w, out_n, out_e,
-                    trim_x, trim_w, trim_my, trim_plane, trim_st, counts):
+                    trim_x, trim_w, trim_m, trim_axis, trim_plane, trim_st, counts):
     """Split the Bezier piece ``pnet`` by the grid planes and integrate it (module docstring).
 
     ``GX[n, :n], GW[n, :n]``: n-point Gauss rules on [0, 1]; ``rule`` = (log of the
@@ -512,13 +515,13 @@ def partition_piece(pnet, origin, h, shape, GX, GW, rule, max_depth,
             if _classify(cnet, fk, fc, nf, 1, kinds):
                 _integrate_cell(pnet, pnet, cnet, sa, sb, ta, tb, False, fk, fc, fplane, kinds, nf,
                                 origin, h, shape, GX, GW, rule, out_st, out_x, out_w, out_n, out_e,
-                                trim_x, trim_w, trim_my, trim_plane, trim_st, counts)
+                                trim_x, trim_w, trim_m, trim_axis, trim_plane, trim_st, counts)
                 continue
             if _classify(cnet, fk, fc, nf, 0, kinds):
                 onet = np.ascontiguousarray(cnet.transpose(1, 0, 2))
                 _integrate_cell(pnet, pnT, onet, ta, tb, sa, sb, True, fk, fc, fplane, kinds, nf,
                                 origin, h, shape, GX, GW, rule, out_st, out_x, out_w, out_n, out_e,
-                                trim_x, trim_w, trim_my, trim_plane, trim_st, counts)
+                                trim_x, trim_w, trim_m, trim_axis, trim_plane, trim_st, counts)
                 continue
         if d >= max_depth:
             counts[2] += 1

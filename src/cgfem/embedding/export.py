@@ -6,7 +6,8 @@
     The active (inside and cut) elements as VTK hexahedra (cell type 12) on the active nodes
     only. Point ``i`` is grid node ``embedding.active_nodes[i]`` (ascending grid node id).
     Cell data: ``status`` int8 (1 inside, 2 cut), ``element_id`` int64 (linear grid element
-    id), ``material_fraction`` float64 (sum of the element's volume weights / h^3, in [0, 1]).
+    id), ``material_fraction`` float64 (sum of the element's volume weights / h^3, in [0, 1]),
+    ``moment_fitted`` int8 (1 for a cut element with the moment-fitted fallback rule).
     Point data: ``node_id`` int64 (linear grid node id).
 ``{name}_surface.vtu``
     One vertex cell per surface quadrature point, at the point ``x`` on the exact surface.
@@ -74,7 +75,8 @@ def grid_mesh(embedding: Embedding) -> meshio.Mesh:
     weight = np.bincount(embedding.volume.element, embedding.volume.w, minlength=grid.n_elements)
     cell_data = {"status": [embedding.status[elements].astype(np.int8)],
                  "element_id": [elements.astype(np.int64)],
-                 "material_fraction": [weight[elements] / grid.h**3]}
+                 "material_fraction": [weight[elements] / grid.h**3],
+                 "moment_fitted": [np.isin(elements, embedding.fallback).astype(np.int8)]}
     return meshio.Mesh(points, [("hexahedron", cells)],
                        point_data={"node_id": embedding.active_nodes.astype(np.int64)},
                        cell_data=cell_data)

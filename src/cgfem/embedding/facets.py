@@ -129,7 +129,6 @@ _EDGE_OF = {frozenset(map(int, pair)): e for e, pair in enumerate(_EDGES)}
 #: _FACE_EDGES[f, k]: the edge from corner _FACES[f, k] to _FACES[f, k + 1]
 _FACE_EDGES = np.array([[_EDGE_OF[frozenset((int(f[k]), int(f[(k + 1) % 4])))] for k in range(4)]
                         for f in _FACES], np.int64)
-PLUS_X_FACE = 1
 #: A triangle (not a sliver) is counted as misoriented when its normal makes more than 120
 #: degrees with the mean exact normal of its crossings (facets of a surface through grid
 #: nodes may be perpendicular to it, which is not an orientation error).
@@ -290,7 +289,7 @@ class FacetBoundary:
     edge_intervals : per cut element (ascending ids), (k, 2) material intervals ``[z0, z1]``
         of its z edge ``(x_{i+1}, y_{j+1})`` on the polyhedron (k = 0 or 1)
     surface : Gauss rule of total ``degree`` on the triangles (uv = NaN, flat normals)
-    trims : ``points``-point Gauss rules on the segments of the cut elements' +x faces
+    trims : ``points``-point Gauss rules on the segments of the cut elements' + faces
     ambiguous_face_key : (f,) sorted keys of the faces with four crossings;
         ambiguous_face_inside (f,) the inside status of their centres (the decision)
     fallback_edges : changing edges whose exact hits were even in number (see module doc)
@@ -347,22 +346,33 @@ class FacetBoundary:
         return SurfaceQuadrature(patch, np.full((w.size, 2), np.nan), x, w, normal, element)
 
     def trim_rule(self, points: int) -> TrimQuadrature:
-        """``points``-point Gauss rules on the +x face segments (exact for degree
-        ``2 points - 1``): (s * points,) rows with ``m_y`` of the normal out of the face's
-        material part."""
-        on_plus_x = self.segment_face == PLUS_X_FACE
-        a = self.vertex_x[self.segments[on_plus_x, 0]]
-        d = self.vertex_x[self.segments[on_plus_x, 1]] - a
+        """``points``-point Gauss rules on the segments of the cut elements' +x, +y and +z
+        faces (exact for degree ``2 points - 1``; every face between two cut elements is the
+        + face of one of them): (s * points,) rows with the in-plane normal out of the
+        face's material part."""
+        plus = self.segment_face % 2 == 1
+        a = self.vertex_x[self.segments[plus, 0]]
+        d = self.vertex_x[self.segments[plus, 1]] - a
+        axis = self.segment_face[plus] // 2
         length = np.linalg.norm(d, axis=1)
         keep = length > 0.0
-        a, d, length = a[keep], d[keep], length[keep]
+        a, d, length, axis = a[keep], d[keep], length[keep], axis[keep]
         g, gw = np.polynomial.legendre.leggauss(points)
         g, gw = 0.5 * (g + 1.0), 0.5 * gw
         x = (a[:, None, :] + g[None, :, None] * d[:, None, :]).reshape(-1, 3)
         w = (length[:, None] * gw[None, :]).reshape(-1)
-        m_y = np.repeat(d[:, 2] / length, points)  # m = d x e_x / |d| = (0, d_z, -d_y) / |d|
-        element = np.repeat(self.segment_element[on_plus_x][keep], points)
-        return TrimQuadrature(x, w, m_y, element)
+        # material on the left of d seen from outside the face (along -e_axis): m = d x e_axis
+        m = np.cross(d, np.eye(3)[axis]) / length[:, None]
+        element = np.repeat(self.segment_element[plus][keep], points)
+        return TrimQuadrature(x, w, np.repeat(m, points, axis=0), np.repeat(axis, points), element)
+
+    def line_hits(self) -> "LineHits":
+        """The polyhedron's crossings of the grid lines (one per changing edge, at the facet
+        vertex), for the column rules of :mod:`cgfem.embedding.columns`."""
+        from cgfem.embedding.columns import LineHits
+        n = self.grid.n_nodes
+        return LineHits.from_crossings(self.grid, self.vertex_key // n, self.vertex_key % n,
+                                       self.vertex_x[np.arange(self.vertex_key.size), self.vertex_key // n])
 
     def fitted_volume_args(self, points: int = DEFAULT_POINTS) -> dict:
         """Keyword arguments of :func:`cgfem.embedding.moments.fitted_volume_rule` (with the
@@ -371,8 +381,9 @@ class FacetBoundary:
         the degrees of the moment integrands."""
         s = self.surface if self.degree >= 2 * points + 1 else self.surface_rule(2 * points + 1)
         t = self.trims if self.points >= points else self.trim_rule(points)
+        t = t.select(t.axis == 0)
         return dict(elements=self.cut, surf_x=s.x, surf_w=s.w, surf_nx=s.normal[:, 0],
-                    surf_element=s.element, trim_x=t.x, trim_w=t.w, trim_my=t.m_y,
+                    surf_element=s.element, trim_x=t.x, trim_w=t.w, trim_my=t.normal[:, 1],
                     trim_element=t.element, edge_intervals=list(self.edge_intervals), n=points)
 
     def cut_volume_rule(self, points: int = DEFAULT_POINTS) -> VolumeRule:

@@ -80,6 +80,8 @@ def fitted_volume_rule(grid: CartesianGrid, elements: np.ndarray,
     """
     elements = np.asarray(elements, np.int64)
     m = elements.size
+    if m == 0:
+        return VolumeRule(np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int64))
     h = grid.h
     ijk = grid.element_ijk(elements)
     centre = grid.element_center(ijk)

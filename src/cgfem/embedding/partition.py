@@ -2,8 +2,8 @@
 
 :func:`partition_surface` returns the surface quadrature of every grid element the boundary
 passes through (NURBS-enhanced: points on the exact surface, with their ``(xi, eta)``) and
-the quadrature of the trimming curves on the grid planes ``x = const`` (used for exact
-volume moments of cut elements, :mod:`cgfem.embedding.moments`). The pieces of surface of
+the quadrature of the trimming curves on the grid planes (used for the exact
+volume rules of cut elements, :mod:`cgfem.embedding.moments`). The pieces of surface of
 neighbouring elements meet exactly along the true intersection curves; the algorithm is in
 :mod:`cgfem.embedding._partition_kernels`.
 """
@@ -57,17 +57,23 @@ class SurfaceQuadrature:
 
 @dataclass(frozen=True)
 class TrimQuadrature:
-    """Quadrature of the curves where the boundary crosses grid planes ``x = const``.
+    """Quadrature of the curves where the boundary crosses the grid planes.
 
-    x : (m, 3) points; w : (m,) length weights; m_y : (m,) y component of the unit normal
-    to the curve, in the plane, pointing out of the solid's section; element : (m,) the
-    element whose ``+x`` face holds the point.
+    x : (m, 3) points; w : (m,) length weights; normal : (m, 3) unit normal to the curve, in
+    its plane, pointing out of the solid's section (zero along ``axis``); axis : (m,) the
+    axis normal to the point's plane; element : (m,) the element whose ``+axis`` face holds
+    the point (-1 if that face is not in the grid).
     """
 
     x: np.ndarray
     w: np.ndarray
-    m_y: np.ndarray
+    normal: np.ndarray
+    axis: np.ndarray
     element: np.ndarray
+
+    def select(self, mask: np.ndarray) -> "TrimQuadrature":
+        """The rows where ``mask`` holds."""
+        return TrimQuadrature(*(getattr(self, f)[mask] for f in ("x", "w", "normal", "axis", "element")))
 
 
 @dataclass(frozen=True)
@@ -97,35 +103,36 @@ def _run_piece(net, grid: CartesianGrid, GX, GW, rule, capacity: int):
         out_e = np.empty((capacity, 3), np.int64)
         trim_x = np.empty((capacity, 3))
         trim_w = np.empty(capacity)
-        trim_my = np.empty(capacity)
+        trim_m = np.empty((capacity, 3))
+        trim_axis = np.empty(capacity, np.int64)
         trim_plane = np.empty(capacity, np.int64)
         trim_st = np.empty((capacity, 2))
         counts = np.zeros(4, np.int64)
         _k.partition_piece(net, np.asarray(grid.origin, float), float(grid.h),
                            np.asarray(grid.shape, np.int64), GX, GW, rule, MAX_DEPTH,
                            out_st, out_x, out_w, out_n, out_e,
-                           trim_x, trim_w, trim_my, trim_plane, trim_st, counts)
+                           trim_x, trim_w, trim_m, trim_axis, trim_plane, trim_st, counts)
         if counts[3] == 0:
             ns, nt = int(counts[0]), int(counts[1])
             return (out_st[:ns], out_x[:ns], out_w[:ns], out_n[:ns], out_e[:ns],
-                    trim_x[:nt], trim_w[:nt], trim_my[:nt], trim_plane[:nt], int(counts[2]))
+                    trim_x[:nt], trim_w[:nt], trim_m[:nt], trim_axis[:nt], trim_plane[:nt], int(counts[2]))
         capacity *= 4
 
 
 def partition_surface(solid: Solid, grid: CartesianGrid, tol: float = DEFAULT_TOL,
                       min_points: int = MIN_POINTS, max_points: int = MAX_POINTS) -> SurfacePartition:
-    """Surface and x-plane trimming quadratures of ``solid`` cut by ``grid``; ``tol`` is the
-    target relative accuracy of each Gauss interval."""
+    """Surface and grid-plane trimming quadratures of ``solid`` cut by ``grid``; ``tol`` is
+    the target relative accuracy of each Gauss interval."""
     GX, GW = gauss_tables(max_points)
     rule = np.array([np.log(tol), min_points, max_points], float)
     rows = {k: [] for k in ("patch", "uv", "x", "w", "normal", "element")}
-    trims = {k: [] for k in ("x", "w", "m_y", "element")}
+    trims = {k: [] for k in ("x", "w", "normal", "axis", "element")}
     approx = 0
     for ip, patch in enumerate(solid.patches):
         for piece, (u0, u1), (v0, v1) in bezier_patches(patch.surface):
             net = np.ascontiguousarray(piece.control)
             capacity = 4096
-            (st, x, w, n, e, tx, tw, tmy, tplane, n_approx) = _run_piece(net, grid, GX, GW, rule, capacity)
+            (st, x, w, n, e, tx, tw, tm, taxis, tplane, n_approx) = _run_piece(net, grid, GX, GW, rule, capacity)
             approx += n_approx
             uv = np.column_stack([u0 + st[:, 0] * (u1 - u0), v0 + st[:, 1] * (v1 - v0)])
             rows["patch"].append(np.full(w.shape, ip, np.int64))
@@ -134,14 +141,17 @@ def partition_surface(solid: Solid, grid: CartesianGrid, tol: float = DEFAULT_TO
             rows["w"].append(w)  # |S_s x S_t| ds dt is already dA
             rows["normal"].append(n)
             rows["element"].append(grid.element_id(e))
-            jk = np.floor((tx[:, 1:] - np.asarray(grid.origin[1:])) / grid.h).astype(np.int64)
-            jk = np.clip(jk, 0, np.asarray(grid.shape[1:]) - 1)
-            ijk = np.column_stack([tplane - 1, jk])
+            ijk = np.floor((tx - np.asarray(grid.origin)) / grid.h).astype(np.int64)
+            ijk = np.clip(ijk, 0, np.asarray(grid.shape) - 1)
+            rows_ = np.arange(tx.shape[0])
+            ijk[rows_, taxis] = tplane - 1  # the element below the plane
+            inside = np.all((ijk >= 0) & (ijk < np.asarray(grid.shape)), axis=1)
             trims["x"].append(tx)
             trims["w"].append(tw)
-            trims["m_y"].append(tmy)
-            trims["element"].append(np.where(ijk[:, 0] >= 0, grid.element_id(np.maximum(ijk, 0)), -1))
+            trims["normal"].append(tm)
+            trims["axis"].append(taxis)
+            trims["element"].append(np.where(inside, grid.element_id(np.where(inside[:, None], ijk, 0)), -1))
     surface = SurfaceQuadrature(*(np.concatenate(rows[k]) for k in
                                   ("patch", "uv", "x", "w", "normal", "element")))
-    trim = TrimQuadrature(*(np.concatenate(trims[k]) for k in ("x", "w", "m_y", "element")))
+    trim = TrimQuadrature(*(np.concatenate(trims[k]) for k in ("x", "w", "normal", "axis", "element")))
     return SurfacePartition(surface, trim, approx)

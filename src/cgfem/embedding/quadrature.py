@@ -3,8 +3,11 @@
 :func:`embed` classifies every grid element as outside, inside or cut and builds
 
 - the volume rule: 2x2x2 Gauss points on inside elements (exact for polynomials of degree
-  <= 3 in each variable), moment-fitted points on cut elements
-  (:mod:`cgfem.embedding.moments`);
+  <= 3 in each variable); on cut elements, positive rules of at most 27 points in the
+  material, exact for degree <= 2 in each variable (:mod:`cgfem.embedding.columns`), or,
+  where the boundary piece is not a graph along any axis, the moment-fitted 3x3x3 rule
+  (:mod:`cgfem.embedding.moments`, exact too, but with points possibly outside the
+  material and signed weights);
 - the surface rule on the exact NURBS boundary, per patch, with ``(xi, eta)``, outward
   normals and owning elements (:mod:`cgfem.embedding.partition`).
 
@@ -21,7 +24,8 @@ import numpy as np
 
 from cgfem.embedding.facets import facet_embedding_parts
 from cgfem.embedding.grid import CartesianGrid
-from cgfem.embedding.lines import cast_z_lines
+from cgfem.embedding.columns import ColumnRules, LineHits, column_rules
+from cgfem.embedding.lines import cast_lines, cast_z_lines
 from cgfem.embedding.moments import DEFAULT_POINTS, VolumeRule, fitted_volume_rule
 from cgfem.embedding.partition import DEFAULT_TOL, SurfaceQuadrature, partition_surface
 from cgfem.geometry.bvh import SurfaceIndex
@@ -39,6 +43,7 @@ class Embedding:
     status : (n_elements,) int8, OUTSIDE / INSIDE / CUT per grid element
     volume : volume rule over the active (inside and cut) elements
     surface : boundary rule; ``surface.patch`` indexes ``patch_names``
+    fallback : ids of the cut elements with a moment-fitted rule instead of a positive one
     """
 
     grid: CartesianGrid
@@ -46,6 +51,7 @@ class Embedding:
     volume: VolumeRule
     surface: SurfaceQuadrature
     patch_names: tuple[str, ...]
+    fallback: np.ndarray
 
     @property
     def active_elements(self) -> np.ndarray:
@@ -59,7 +65,8 @@ class Embedding:
 
     def counts(self) -> dict[str, int]:
         return {"inside": int(np.sum(self.status == INSIDE)), "cut": int(np.sum(self.status == CUT)),
-                "active": int(np.sum(self.status != OUTSIDE)), "nodes": int(self.active_nodes.size)}
+                "active": int(np.sum(self.status != OUTSIDE)), "nodes": int(self.active_nodes.size),
+                "fitted": int(self.fallback.size)}
 
     def area_by_name(self) -> dict[str, float]:
         """Surface-rule area of every named surface."""
@@ -118,8 +125,14 @@ def embed(solid: Solid, grid: CartesianGrid, surface: str = "nurbs", tol: float 
     names = tuple(p.name for p in solid.patches)
     if surface == "facets":
         parts = facet_embedding_parts(solid, grid, index)
-        return _assemble(grid, parts.status, parts.cut_volume_rule(points), parts.surface, names)
-    lines = cast_z_lines(index, grid)
+        cut = parts.cut
+        args = parts.fitted_volume_args(points)
+        # the column integrands have degree 2 points + 1 on the triangles, like the moments'
+        exact = parts.surface if parts.degree >= 2 * points + 1 else parts.surface_rule(2 * points + 1)
+        rules = column_rules(grid, cut, exact, parts.trims, parts.line_hits())
+        fitted = _fallback_rule(grid, rules, args, points)
+        return _assemble(grid, parts.status, rules, fitted, parts.surface, names)
+    z_lines = cast_z_lines(index, grid)
     part = partition_surface(solid, grid, tol)
     status = np.zeros(grid.n_elements, np.int8)
     cut = np.unique(part.surface.element[part.surface.w > 0.0])
@@ -129,19 +142,33 @@ def embed(solid: Solid, grid: CartesianGrid, surface: str = "nurbs", tol: float 
     uncut = np.flatnonzero(status != CUT)
     centres = grid.element_center(grid.element_ijk(uncut))
     status[uncut[points_inside(index, centres)]] = INSIDE
-    cut_ijk = grid.element_ijk(cut)
+    xy = [cast_lines(index, grid, axis).paired() for axis in (0, 1)]
+    hits = LineHits((xy[0].offsets, xy[1].offsets, z_lines.offsets), (xy[0].coord, xy[1].coord, z_lines.z))
+    rules = column_rules(grid, cut, part.surface, part.trims, hits)
+    s, t = part.surface, part.trims.select(part.trims.axis == 0)
+    fitted_elements = rules.fallback
+    cut_ijk = grid.element_ijk(fitted_elements)
     z0 = grid.plane(2, cut_ijk[:, 2])
-    edges = [lines.inside_intervals(i + 1, j + 1, a, a + grid.h)
-             for (i, j, _), a in zip(cut_ijk, z0)]
-    s, t = part.surface, part.trims
-    cut_rule = fitted_volume_rule(grid, cut, s.x, s.w, s.normal[:, 0], s.element,
-                                  t.x, t.w, t.m_y, t.element, edges, n=points)
-    return _assemble(grid, status, cut_rule, part.surface, names)
+    edges = [z_lines.inside_intervals(i + 1, j + 1, a, a + grid.h) for (i, j, _), a in zip(cut_ijk, z0)]
+    args = dict(elements=fitted_elements, surf_x=s.x, surf_w=s.w, surf_nx=s.normal[:, 0], surf_element=s.element,
+                trim_x=t.x, trim_w=t.w, trim_my=t.normal[:, 1], trim_element=t.element, edge_intervals=edges)
+    fitted = fitted_volume_rule(grid, **args, n=points)
+    return _assemble(grid, status, rules, fitted, part.surface, names)
 
 
-def _assemble(grid: CartesianGrid, status: np.ndarray, cut_rule: VolumeRule,
+def _fallback_rule(grid: CartesianGrid, rules: ColumnRules, args: dict, points: int) -> VolumeRule:
+    """Moment-fitted rules of the elements of ``rules.fallback`` (``args``: the boundary
+    data of all cut elements, :func:`fitted_volume_rule`'s keywords)."""
+    pick = np.isin(args["elements"], rules.fallback)
+    args = dict(args, elements=args["elements"][pick],
+                edge_intervals=[iv for iv, p in zip(args["edge_intervals"], pick) if p])
+    args.pop("n", None)
+    return fitted_volume_rule(grid, **args, n=points)
+
+
+def _assemble(grid: CartesianGrid, status: np.ndarray, rules: ColumnRules, fitted: VolumeRule,
               surface: SurfaceQuadrature, names: tuple[str, ...]) -> Embedding:
     inner = _interior_rule(grid, np.flatnonzero(status == INSIDE))
-    volume = VolumeRule(*(np.concatenate([getattr(inner, f), getattr(cut_rule, f)])
+    volume = VolumeRule(*(np.concatenate([getattr(inner, f), getattr(rules.volume, f), getattr(fitted, f)])
                           for f in ("x", "w", "element")))
-    return Embedding(grid, status, volume, surface, names)
+    return Embedding(grid, status, volume, surface, names, rules.fallback)

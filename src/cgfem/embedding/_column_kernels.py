@@ -1,0 +1,340 @@
+"""Numba kernels of the positive volume rules of cut elements (:mod:`cgfem.embedding.columns`).
+
+Per cut element: the exact column rule of its material part (positive, every point in the
+material), then Caratheodory recombination to at most ``N_MOMENTS`` points with the same
+moments. Arrays are flat; the Python layer groups the inputs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+#: Legendre polynomials per direction matched by the rules (degree <= 2 in each variable)
+N_POLY = 3
+N_MOMENTS = N_POLY**3
+#: Gauss points per column and per face strip: exact for degree <= 3 along them
+N_GAUSS = 2
+#: a normal component of this size (or less) of the wrong sign still counts as a graph
+SIGN_EPS = 1e-12
+#: relative rank threshold of the Gauss-Jordan elimination in the recombination
+RANK_TOL = 1e-12
+#: accepted moment error of the recombined rule, relative to the element's material measure
+MOMENT_TOL = 1e-10
+
+OK, NO_DIRECTION, NOT_RECOMBINED = 0, 1, 2
+
+
+@njit(cache=True)
+def legendre_row(xi, out):
+    """The ``N_MOMENTS`` tensor Legendre values ``L_a(xi0) L_b(xi1) L_c(xi2)`` at local
+    coordinates ``xi`` (3,), ``a`` slowest."""
+    L = np.empty((3, N_POLY))
+    for d in range(3):
+        L[d, 0] = 1.0
+        L[d, 1] = xi[d]
+        L[d, 2] = 1.5 * xi[d] * xi[d] - 0.5
+    k = 0
+    for a in range(N_POLY):
+        for b in range(N_POLY):
+            for c in range(N_POLY):
+                out[k] = L[0, a] * L[1, b] * L[2, c]
+                k += 1
+
+
+@njit(cache=True)
+def _null_space(phi, rows, n, tol):
+    """Orthonormal null vectors (f, n) of the matrix whose columns are ``phi[rows[:n]]``:
+    the right singular vectors of the singular values below ``tol`` times the largest."""
+    d = phi.shape[1]
+    M = np.empty((n, d))
+    for j in range(n):
+        for r in range(d):
+            M[j, r] = phi[rows[j], r]
+    # the left singular vectors of M (n, d) are the right ones of its transpose
+    U, S, _ = np.linalg.svd(M)
+    rank = 0
+    for r in range(S.shape[0]):
+        if S[r] > tol * S[0]:
+            rank += 1
+    return np.ascontiguousarray(U[:, rank:].T)
+
+
+@njit(cache=True)
+def caratheodory(phi, rows, n, w):
+    """Make at most ``rank`` of the positive weights ``w[:n]`` of the points ``rows[:n]``
+    (moment vectors ``phi[rows]``) nonzero, keeping ``sum w phi`` and ``w >= 0``: each null
+    vector of the moment matrix moves the weights until one of them vanishes."""
+    if n <= 1:
+        return
+    V = _null_space(phi, rows, n, RANK_TOL)
+    for k in range(V.shape[0]):
+        v = V[k]
+        positive = False
+        for i in range(n):
+            if v[i] > 0.0:
+                positive = True
+                break
+        if not positive:
+            for i in range(n):
+                v[i] = -v[i]
+        alpha = np.inf
+        drop = -1
+        for i in range(n):
+            if v[i] > 0.0 and w[i] / v[i] < alpha:
+                alpha = w[i] / v[i]
+                drop = i
+        if drop < 0:
+            continue
+        for i in range(n):
+            w[i] = max(w[i] - alpha * v[i], 0.0)
+        w[drop] = 0.0
+        for j in range(k + 1, V.shape[0]):
+            f = V[j, drop] / v[drop]
+            if f != 0.0:
+                for i in range(n):
+                    V[j, i] -= f * v[i]
+            V[j, drop] = 0.0
+
+
+@njit(cache=True)
+def recombine(phi, w):
+    """Positive weights ``w`` (N,) of points with moment vectors ``phi`` (N, d) -> weights
+    with at most d nonzero and the same moments (in place). Groups of points are recombined
+    first (2 d groups, each represented by its weighted mean), which halves the support per
+    round at the cost of one small elimination."""
+    N, d = phi.shape
+    idx = np.flatnonzero(w > 0.0)
+    while idx.size > 2 * d:
+        G = 2 * d
+        bounds = np.empty(G + 1, np.int64)
+        for g in range(G + 1):
+            bounds[g] = (g * idx.size) // G
+        mean = np.zeros((G, d))
+        W = np.zeros(G)
+        for g in range(G):
+            for t in range(bounds[g], bounds[g + 1]):
+                i = idx[t]
+                W[g] += w[i]
+                for r in range(d):
+                    mean[g, r] += w[i] * phi[i, r]
+            for r in range(d):
+                mean[g, r] /= W[g]
+        Wn = W.copy()
+        caratheodory(mean, np.arange(G), G, Wn)
+        for g in range(G):
+            f = Wn[g] / W[g]
+            for t in range(bounds[g], bounds[g + 1]):
+                w[idx[t]] *= f
+        idx = np.flatnonzero(w > 0.0)
+    wi = w[idx].copy()
+    caratheodory(phi, idx, idx.size, wi)
+    for t in range(idx.size):
+        w[idx[t]] = wi[t]
+
+
+@njit(cache=True)
+def _line_intervals(l_start, l_off, l_coord, node_shape, axis, i_other, lo, hi, out):
+    """Material intervals within ``[lo, hi]`` of the grid line along ``axis`` through the
+    nodes whose indices are ``i_other`` (3,) on the other axes -> count written to ``out``."""
+    b = 1 if axis == 0 else 0
+    c = 1 if axis == 2 else 2
+    line = i_other[b] * node_shape[c] + i_other[c]
+    start = l_off[l_start[axis] + line]
+    stop = l_off[l_start[axis] + line + 1]
+    n = 0
+    for k in range(start, stop - 1, 2):
+        a0 = max(l_coord[k], lo)
+        a1 = min(l_coord[k + 1], hi)
+        if a1 > a0 and n < out.shape[0]:
+            out[n, 0] = a0
+            out[n, 1] = a1
+            n += 1
+    return n
+
+
+@njit(cache=True)
+def _graph_sign(normals, weights, first, stop, axis):
+    """+1 (or -1) if the ``axis`` component of every normal ``first:stop`` with a positive
+    weight is >= -eps (<= eps), preferring the sign of the weighted sum; 0 if neither."""
+    lo = np.inf
+    hi = -np.inf
+    total = 0.0
+    for i in range(first, stop):
+        if weights[i] > 0.0:
+            lo = min(lo, normals[i, axis])
+            hi = max(hi, normals[i, axis])
+            total += weights[i] * normals[i, axis]
+    up = lo >= -SIGN_EPS
+    down = hi <= SIGN_EPS
+    if up and (total >= 0.0 or not down):
+        return 1
+    if down:
+        return -1
+    return 0
+
+
+@njit(cache=True)
+def _column_rule(e_ijk, origin, h, shape, node_shape, s_x, s_w, s_n, s0, s1,
+                 t_key, t_x, t_w, t_n, l_start, l_off, l_coord, gx, gw):
+    """The exact column rule of one cut element: points (N, 3) and positive weights (N,),
+    or empty arrays when no axis makes its boundary a graph.
+
+    With the height axis ``a`` along which every outward surface normal has the sign
+    ``sigma`` (the boundary piece is a graph with the material on the ``-sigma`` side), the
+    material part is the union of the columns from each surface point to the element face
+    opposite to ``sigma``, and of the full columns over the material region ``R`` of the
+    face on the ``sigma`` side. ``R`` is split the same way in the face plane: strips from
+    each trimming point along an in-plane axis ``b`` (whose normal components have one sign
+    ``tau``) to the face edge, and full strips over the material intervals of the edge on
+    the ``tau`` side (a grid line). Gauss points on columns and strips make the rule exact
+    for polynomials of degree <= 3 along them.
+    """
+    lo = np.empty(3)
+    for d in range(3):
+        lo[d] = origin[d] + e_ijk[d] * h
+    order = np.empty(3, np.int64)
+    score = np.zeros(3)
+    for d in range(3):
+        for i in range(s0, s1):
+            score[d] += s_w[i] * s_n[i, d]
+    sabs = np.abs(score)
+    order[:] = np.argsort(-sabs)
+    intervals = np.empty((8, 2))
+    n_el = shape[0] * shape[1] * shape[2]
+    for oa in range(3):
+        a = order[oa]
+        sigma = _graph_sign(s_n, s_w, s0, s1, a)
+        if sigma == 0:
+            continue
+        # trims of the face on the sigma side: keys axis * n_el + (element below the face)
+        below = e_ijk.copy()
+        if sigma < 0:
+            below[a] -= 1
+        if below[a] < 0:
+            continue
+        key = a * n_el + (below[0] * shape[1] + below[1]) * shape[2] + below[2]
+        t0 = np.searchsorted(t_key, key)
+        t1 = np.searchsorted(t_key, key + 1)
+        for ob in range(2):
+            b = (a + 1 + ob) % 3
+            c = (a + 2 - ob) % 3
+            tau = _graph_sign(t_n, t_w, t0, t1, b)
+            if tau == 0:
+                continue
+            # the edge of the face on the tau side, a grid line along c
+            nodes = e_ijk.copy()
+            nodes[a] += 1 if sigma > 0 else 0
+            nodes[b] += 1 if tau > 0 else 0
+            n_int = _line_intervals(l_start, l_off, l_coord, node_shape, c, nodes,
+                                    lo[c], lo[c] + h, intervals)
+            ng = gx.shape[0]
+            cap = ng * (s1 - s0) + ng * ng * (t1 - t0) + ng * ng * ng * n_int
+            x = np.empty((cap, 3))
+            w = np.empty(cap)
+            m = 0
+            for i in range(s0, s1):  # columns under (sigma > 0) or over the surface points
+                if s_w[i] <= 0.0:
+                    continue
+                top = s_x[i, a]
+                c0 = lo[a] if sigma > 0 else top
+                c1 = top if sigma > 0 else lo[a] + h
+                for g in range(ng):
+                    x[m, 0] = s_x[i, 0]
+                    x[m, 1] = s_x[i, 1]
+                    x[m, 2] = s_x[i, 2]
+                    x[m, a] = c0 + gx[g] * (c1 - c0)
+                    w[m] = s_w[i] * abs(s_n[i, a]) * gw[g] * (c1 - c0)
+                    m += 1
+            # the face region R: 2D points (b, c) with weights, then full columns along a
+            n2 = ng * (t1 - t0) + ng * ng * n_int
+            p2 = np.empty((n2, 2))
+            w2 = np.empty(n2)
+            k2 = 0
+            for i in range(t0, t1):
+                if t_w[i] <= 0.0:
+                    continue
+                yb = t_x[i, b]
+                b0 = lo[b] if tau > 0 else yb
+                b1 = yb if tau > 0 else lo[b] + h
+                for g in range(ng):
+                    p2[k2, 0] = b0 + gx[g] * (b1 - b0)
+                    p2[k2, 1] = t_x[i, c]
+                    w2[k2] = t_w[i] * abs(t_n[i, b]) * gw[g] * (b1 - b0)
+                    k2 += 1
+            for r in range(n_int):
+                span = intervals[r, 1] - intervals[r, 0]
+                for gc in range(ng):
+                    for gb in range(ng):
+                        p2[k2, 0] = lo[b] + gx[gb] * h
+                        p2[k2, 1] = intervals[r, 0] + gx[gc] * span
+                        w2[k2] = gw[gb] * h * gw[gc] * span
+                        k2 += 1
+            for k in range(k2):
+                for g in range(ng):
+                    x[m, a] = lo[a] + gx[g] * h
+                    x[m, b] = p2[k, 0]
+                    x[m, c] = p2[k, 1]
+                    w[m] = w2[k] * gw[g] * h
+                    m += 1
+            return x[:m], w[:m]
+    return np.empty((0, 3)), np.empty(0)
+
+
+@njit(cache=True, parallel=True)
+def column_rules(elements_ijk, origin, h, shape, node_shape, s_x, s_w, s_n, s_off,
+                 t_key, t_x, t_w, t_n, l_start, l_off, l_coord, gx, gw,
+                 out_x, out_w, out_count, out_status, out_full, out_moments):
+    """Positive rules of at most ``N_MOMENTS`` points for every cut element (rows of
+    ``elements_ijk``): ``out_x`` (m, N_MOMENTS, 3), ``out_w``, ``out_count`` (m,),
+    ``out_status`` (m,) OK / NO_DIRECTION / NOT_RECOMBINED, ``out_full`` (m,) the size of
+    the exact column rule and ``out_moments`` (m, N_MOMENTS) its local Legendre moments."""
+    m = elements_ijk.shape[0]
+    half = 0.5 * h
+    for e in prange(m):
+        ijk = elements_ijk[e].copy()
+        x, w = _column_rule(ijk, origin, h, shape, node_shape, s_x, s_w, s_n, s_off[e], s_off[e + 1],
+                            t_key, t_x, t_w, t_n, l_start, l_off, l_coord, gx, gw)
+        n = w.shape[0]
+        out_full[e] = n
+        out_count[e] = 0
+        if n == 0:
+            out_status[e] = NO_DIRECTION
+            continue
+        centre = np.empty(3)
+        for d in range(3):
+            centre[d] = origin[d] + (ijk[d] + 0.5) * h
+        phi = np.empty((n, N_MOMENTS))
+        xi = np.empty(3)
+        wl = np.empty(n)
+        for i in range(n):
+            for d in range(3):
+                xi[d] = (x[i, d] - centre[d]) / half
+            legendre_row(xi, phi[i])
+            wl[i] = w[i] / half**3
+        full = np.zeros(N_MOMENTS)
+        for i in range(n):
+            for r in range(N_MOMENTS):
+                full[r] += wl[i] * phi[i, r]
+        for r in range(N_MOMENTS):
+            out_moments[e, r] = full[r]
+        recombine(phi, wl)
+        err = 0.0
+        k = 0
+        got = np.zeros(N_MOMENTS)
+        for i in range(n):
+            if wl[i] > 0.0:
+                for r in range(N_MOMENTS):
+                    got[r] += wl[i] * phi[i, r]
+                if k < N_MOMENTS:
+                    for d in range(3):
+                        out_x[e, k, d] = x[i, d]
+                    out_w[e, k] = wl[i] * half**3
+                k += 1
+        for r in range(N_MOMENTS):
+            err = max(err, abs(got[r] - full[r]))
+        if k > N_MOMENTS or not err <= MOMENT_TOL * max(full[0], 1e-300):
+            out_status[e] = NOT_RECOMBINED
+            continue
+        out_count[e] = k
+        out_status[e] = OK
