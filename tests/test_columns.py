@@ -52,7 +52,7 @@ def test_nurbs_rules_are_positive_and_inside(name, level):
     assert np.all(w > 0.0)
     assert np.bincount(element).max() <= 27
     assert np.all(points_inside(SurfaceIndex.build(solid), x))
-    assert emb.fallback.size <= 0.08 * cut.size
+    assert emb.fallback.size <= 0.01 * cut.size
 
 
 @pytest.mark.parametrize("name", ["sphere", "half_torus"])
@@ -73,7 +73,7 @@ def test_nurbs_column_rules_match_moment_fitting(name):
     cut = np.unique(part.surface.element[part.surface.w > 0.0])
     rules = column_rules(grid, cut, part.surface, part.trims, hits)
     ok = rules.status == OK
-    assert ok.mean() > 0.9
+    assert ok.all()
     z = cast_z_lines(index, grid)
     s, t = part.surface, part.trims.select(part.trims.axis == 0)
     ijk = grid.element_ijk(cut)
@@ -89,17 +89,20 @@ def test_nurbs_column_rules_match_moment_fitting(name):
     assert np.abs(got - rules.moments[ok]).max() <= 1e-12
 
 
-def test_fallback_shrinks_with_refinement():
-    """Elements without a graph direction sit where the boundary is not a graph at the scale
-    of h (a cap's rim, tangencies); their share falls as h does."""
+def test_fallback_is_rare_and_exact():
+    """Only elements where no axis makes the boundary a graph keep the moment-fitted rule:
+    none on the link at levels 0-1 and at most 0.1 % at levels 2-3; a torus whose tube is
+    barely thicker than h has some at level 0, and its volume stays exact."""
     spec, h0 = SOLIDS["half_torus"]
     solid = build_solid(spec)
-    shares = []
-    for level in (0, 1, 2):
+    for level in range(4):
         emb = embed(solid, grid_for(solid, h0, level, OFFSET))
-        shares.append(emb.fallback.size / emb.counts()["cut"])
-    assert shares[2] < shares[1] < shares[0]
-    assert shares[2] < 0.05
+        assert emb.fallback.size <= (0 if level < 2 else 1e-3 * emb.counts()["cut"])
+    spec, h0 = SOLIDS["torus"]
+    solid = build_solid(spec)
+    emb = embed(solid, grid_for(solid, h0, 0, OFFSET))
+    assert 0 < emb.fallback.size < 0.2 * emb.counts()["cut"]
+    assert emb.volume.w.sum() == pytest.approx(2 * np.pi**2 * 1.0 * 0.4**2, rel=1e-8)
 
 
 @pytest.mark.parametrize("name", ["sphere", "torus", "half_torus"])
@@ -120,7 +123,7 @@ def test_facet_rules_are_positive_and_exact(name):
     fitted = _local_moments(grid, cut, rule.x, rule.w, rule.element)[np.searchsorted(cut, positive)]
     got = _local_moments(grid, positive, x, w, element)
     assert np.abs(got - fitted).max() <= 1e-11 * 8
-    assert emb.fallback.size <= 0.03 * cut.size
+    assert emb.fallback.size <= 0.01 * cut.size
 
 
 @pytest.mark.parametrize("n,spread", [(28, 1.0), (300, 1.0), (300, 1e-3)])

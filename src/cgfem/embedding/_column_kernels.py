@@ -21,6 +21,8 @@ SIGN_EPS = 1e-12
 RANK_TOL = 1e-12
 #: accepted moment error of the recombined rule, relative to the element's material measure
 MOMENT_TOL = 1e-10
+#: most elements in the stack of :func:`_stack_rule`
+MAX_STACK = 8
 
 OK, NO_DIRECTION, NOT_RECOMBINED = 0, 1, 2
 
@@ -175,7 +177,95 @@ def _graph_sign(normals, weights, first, stop, axis):
 
 
 @njit(cache=True)
-def _column_rule(e_ijk, origin, h, shape, node_shape, s_x, s_w, s_n, s0, s1,
+def _one_sign(normals, weights, first, stop, axis, sigma):
+    """Whether ``sigma`` times the ``axis`` component of every normal ``first:stop`` with a
+    positive weight is >= -eps."""
+    for i in range(first, stop):
+        if weights[i] > 0.0 and sigma * normals[i, axis] < -SIGN_EPS:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _face_key(ijk, a, sigma, shape):
+    """Trim key of the face of element ``ijk`` on the ``sigma`` side along ``a``: ``a *
+    n_elements +`` the element below the face; -1 (no trims) if that face is the grid's
+    boundary."""
+    below = ijk[a] - (1 if sigma < 0 else 0)
+    if below < 0:
+        return -1
+    n_el = shape[0] * shape[1] * shape[2]
+    i = ijk[0] if a != 0 else below
+    j = ijk[1] if a != 1 else below
+    k = ijk[2] if a != 2 else below
+    return a * n_el + (i * shape[1] + j) * shape[2] + k
+
+
+@njit(cache=True)
+def _stack_rule(e_ijk, a, sigma, h, lo, shape, node_shape, element_ids, s_x, s_w, s_n, s_off,
+                t_key, l_start, l_off, l_coord, gx, gw):
+    """Column rule of a cut element along ``a`` from the boundary points of the *stack* of
+    elements above it (``sigma > 0``; below it for ``sigma < 0``), up to the first whose far
+    face holds no material: every column ends at its one boundary crossing in the stack,
+    so the columns of the points beyond the element are full. Needs every normal of the
+    stack to have the sign ``sigma`` along ``a``; empty arrays otherwise."""
+    first = np.empty(MAX_STACK, np.int64)
+    stop = np.empty(MAX_STACK, np.int64)
+    intervals = np.empty((8, 2))
+    n_ranges = 0
+    total = 0
+    cur = e_ijk.copy()
+    closed = False
+    b = (a + 1) % 3
+    for depth in range(MAX_STACK):
+        if cur[a] < 0 or cur[a] >= shape[a]:
+            break
+        eid = (cur[0] * shape[1] + cur[1]) * shape[2] + cur[2]
+        r = np.searchsorted(element_ids, eid)
+        if r < element_ids.shape[0] and element_ids[r] == eid:
+            if not _one_sign(s_n, s_w, s_off[r], s_off[r + 1], a, sigma):
+                break
+            first[n_ranges] = s_off[r]
+            stop[n_ranges] = s_off[r + 1]
+            n_ranges += 1
+            total += s_off[r + 1] - s_off[r]
+        key = _face_key(cur, a, sigma, shape)
+        t0 = np.searchsorted(t_key, key)
+        if t0 == t_key.shape[0] or t_key[t0] != key:
+            # no trimming curve: the far face is all material or none, as its edge along b
+            nodes = cur.copy()
+            nodes[a] += 1 if sigma > 0 else 0
+            if _line_intervals(l_start, l_off, l_coord, node_shape, b, nodes,
+                               lo[b], lo[b] + h, intervals) == 0:
+                closed = True
+                break
+        cur[a] += sigma
+    if not closed:
+        return np.empty((0, 3)), np.empty(0)
+    ng = gx.shape[0]
+    x = np.empty((ng * total, 3))
+    w = np.empty(ng * total)
+    m = 0
+    for r in range(n_ranges):
+        for i in range(first[r], stop[r]):
+            if s_w[i] <= 0.0:
+                continue
+            c0 = lo[a] if sigma > 0 else max(s_x[i, a], lo[a])
+            c1 = min(s_x[i, a], lo[a] + h) if sigma > 0 else lo[a] + h
+            if c1 <= c0:
+                continue
+            for g in range(ng):
+                x[m, 0] = s_x[i, 0]
+                x[m, 1] = s_x[i, 1]
+                x[m, 2] = s_x[i, 2]
+                x[m, a] = c0 + gx[g] * (c1 - c0)
+                w[m] = s_w[i] * abs(s_n[i, a]) * gw[g] * (c1 - c0)
+                m += 1
+    return x[:m], w[:m]
+
+
+@njit(cache=True)
+def _column_rule(e_ijk, origin, h, shape, node_shape, element_ids, s_x, s_w, s_n, s_off, row,
                  t_key, t_x, t_w, t_n, l_start, l_off, l_coord, gx, gw):
     """The exact column rule of one cut element: points (N, 3) and positive weights (N,),
     or empty arrays when no axis makes its boundary a graph.
@@ -187,9 +277,13 @@ def _column_rule(e_ijk, origin, h, shape, node_shape, s_x, s_w, s_n, s0, s1,
     face on the ``sigma`` side. ``R`` is split the same way in the face plane: strips from
     each trimming point along an in-plane axis ``b`` (whose normal components have one sign
     ``tau``) to the face edge, and full strips over the material intervals of the edge on
-    the ``tau`` side (a grid line). Gauss points on columns and strips make the rule exact
-    for polynomials of degree <= 3 along them.
+    the ``tau`` side (a grid line). Where no in-plane axis makes ``R``'s trimming curves a
+    graph, the columns come from the stack of elements instead (:func:`_stack_rule`).
+    Gauss points on columns and strips make the rule exact for polynomials of degree <= 3
+    along them.
     """
+    s0 = s_off[row]
+    s1 = s_off[row + 1]
     lo = np.empty(3)
     for d in range(3):
         lo[d] = origin[d] + e_ijk[d] * h
@@ -201,19 +295,13 @@ def _column_rule(e_ijk, origin, h, shape, node_shape, s_x, s_w, s_n, s0, s1,
     sabs = np.abs(score)
     order[:] = np.argsort(-sabs)
     intervals = np.empty((8, 2))
-    n_el = shape[0] * shape[1] * shape[2]
     for oa in range(3):
         a = order[oa]
         sigma = _graph_sign(s_n, s_w, s0, s1, a)
         if sigma == 0:
             continue
-        # trims of the face on the sigma side: keys axis * n_el + (element below the face)
-        below = e_ijk.copy()
-        if sigma < 0:
-            below[a] -= 1
-        if below[a] < 0:
-            continue
-        key = a * n_el + (below[0] * shape[1] + below[1]) * shape[2] + below[2]
+        # trims of the face on the sigma side (none on the grid's boundary)
+        key = _face_key(e_ijk, a, sigma, shape)
         t0 = np.searchsorted(t_key, key)
         t1 = np.searchsorted(t_key, key + 1)
         for ob in range(2):
@@ -278,22 +366,27 @@ def _column_rule(e_ijk, origin, h, shape, node_shape, s_x, s_w, s_n, s0, s1,
                     w[m] = w2[k] * gw[g] * h
                     m += 1
             return x[:m], w[:m]
+        x, w = _stack_rule(e_ijk, a, sigma, h, lo, shape, node_shape, element_ids, s_x, s_w, s_n,
+                           s_off, t_key, l_start, l_off, l_coord, gx, gw)
+        if w.shape[0] > 0:
+            return x, w
     return np.empty((0, 3)), np.empty(0)
 
 
 @njit(cache=True, parallel=True)
-def column_rules(elements_ijk, origin, h, shape, node_shape, s_x, s_w, s_n, s_off,
+def column_rules(element_ids, elements_ijk, origin, h, shape, node_shape, s_x, s_w, s_n, s_off,
                  t_key, t_x, t_w, t_n, l_start, l_off, l_coord, gx, gw,
                  out_x, out_w, out_count, out_status, out_full, out_moments):
-    """Positive rules of at most ``N_MOMENTS`` points for every cut element (rows of
-    ``elements_ijk``): ``out_x`` (m, N_MOMENTS, 3), ``out_w``, ``out_count`` (m,),
+    """Positive rules of at most ``N_MOMENTS`` points for every cut element (ids
+    ``element_ids``, ascending, indices ``elements_ijk``; boundary points of row ``e`` are
+    ``s_off[e]:s_off[e + 1]``): ``out_x`` (m, N_MOMENTS, 3), ``out_w``, ``out_count`` (m,),
     ``out_status`` (m,) OK / NO_DIRECTION / NOT_RECOMBINED, ``out_full`` (m,) the size of
     the exact column rule and ``out_moments`` (m, N_MOMENTS) its local Legendre moments."""
     m = elements_ijk.shape[0]
     half = 0.5 * h
     for e in prange(m):
         ijk = elements_ijk[e].copy()
-        x, w = _column_rule(ijk, origin, h, shape, node_shape, s_x, s_w, s_n, s_off[e], s_off[e + 1],
+        x, w = _column_rule(ijk, origin, h, shape, node_shape, element_ids, s_x, s_w, s_n, s_off, e,
                             t_key, t_x, t_w, t_n, l_start, l_off, l_coord, gx, gw)
         n = w.shape[0]
         out_full[e] = n

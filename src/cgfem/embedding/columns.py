@@ -125,7 +125,7 @@ def column_rules(grid: CartesianGrid, elements: np.ndarray, surface: SurfaceQuad
     out_full = np.zeros(m, np.int64)
     out_moments = np.zeros((m, N_MOMENTS))
     if m:
-        _k.column_rules(grid.element_ijk(elements), np.asarray(grid.origin, float), float(grid.h),
+        _k.column_rules(elements, grid.element_ijk(elements), np.asarray(grid.origin, float), float(grid.h),
                         np.asarray(grid.shape, np.int64), np.asarray(grid.node_shape, np.int64),
                         np.ascontiguousarray(surface.x[order]), np.ascontiguousarray(surface.w[order]),
                         np.ascontiguousarray(surface.normal[order]), s_off,
