@@ -28,15 +28,16 @@ SOLIDS = {
 OFFSET = (0.13, 0.29, 0.41)
 
 
-def _local_moments(grid, elements, x, w, element) -> np.ndarray:
-    """Tensor Legendre moments (len(elements), 27) of a rule, in local element coordinates."""
-    rows = np.searchsorted(elements, element)
+def _local_moments(grid, keys, key, x, w, element, dim: int = 3) -> np.ndarray:
+    """Tensor Legendre moments (len(keys), 27) of a rule summed per group ``key`` (sorted
+    ``keys``), in the local coordinates of each point's element (weights / (h/2)^dim)."""
+    rows = np.searchsorted(keys, key)
     xi = (x - grid.element_center(grid.element_ijk(element))) / (0.5 * grid.h)
     phi = np.empty((len(x), 27))
     for i, p in enumerate(xi):
         legendre_row(p, phi[i])
-    out = np.zeros((len(elements), 27))
-    np.add.at(out, rows, (w / (0.5 * grid.h) ** 3)[:, None] * phi)
+    out = np.zeros((len(keys), 27))
+    np.add.at(out, rows, (w / (0.5 * grid.h) ** dim)[:, None] * phi)
     return out
 
 
@@ -81,11 +82,12 @@ def test_nurbs_column_rules_match_moment_fitting(name):
              for (i, j, _), a in zip(ijk, grid.plane(2, ijk[:, 2]))]
     fitted = fitted_volume_rule(grid, cut, s.x, s.w, s.normal[:, 0], s.element,
                                 t.x, t.w, t.normal[:, 1], t.element, edges)
-    expected = _local_moments(grid, cut, fitted.x, fitted.w, fitted.element)
+    expected = _local_moments(grid, cut, fitted.element, fitted.x, fitted.w, fitted.element)
     assert np.abs(rules.moments[ok] - expected[ok]).max() <= 1e-9
     # and the recombined rules keep the column rules' moments
     mask = np.isin(rules.volume.element, cut[ok])
-    got = _local_moments(grid, cut[ok], rules.volume.x[mask], rules.volume.w[mask], rules.volume.element[mask])
+    got = _local_moments(grid, cut[ok], rules.volume.element[mask], rules.volume.x[mask], rules.volume.w[mask],
+                         rules.volume.element[mask])
     assert np.abs(got - rules.moments[ok]).max() <= 1e-12
 
 
@@ -120,8 +122,8 @@ def test_facet_rules_are_positive_and_exact(name):
     lo = grid.element_corner(grid.element_ijk(element))
     assert np.all((x >= lo) & (x <= lo + grid.h))
     rule = fitted_volume_rule(grid, **parts.fitted_volume_args())
-    fitted = _local_moments(grid, cut, rule.x, rule.w, rule.element)[np.searchsorted(cut, positive)]
-    got = _local_moments(grid, positive, x, w, element)
+    fitted = _local_moments(grid, cut, rule.element, rule.x, rule.w, rule.element)[np.searchsorted(cut, positive)]
+    got = _local_moments(grid, positive, element, x, w, element)
     assert np.abs(got - fitted).max() <= 1e-11 * 8
     assert emb.fallback.size <= 0.01 * cut.size
 
@@ -139,3 +141,27 @@ def test_recombination_keeps_moments_with_at_most_27_positive_weights(n, spread)
     recombine(phi, w)
     assert np.all(w >= 0.0) and np.count_nonzero(w) <= 27
     assert np.abs(w @ phi - target).max() <= 1e-13 * target[0]
+
+
+@pytest.mark.parametrize("surface", ["nurbs", "facets"])
+def test_reduced_boundary_rule_keeps_exact_points_and_polynomial_integrals(surface):
+    """At most 27 points per element and patch, a subset of the exact rule's (same position,
+    parameters, normal), positive weights, and the same integrals of every tensor Legendre
+    polynomial of degree <= 2 per variable on every (element, patch)."""
+    spec, h0 = SOLIDS["half_torus"]
+    solid = build_solid(spec)
+    emb = embed(solid, grid_for(solid, h0, 1, OFFSET), surface)
+    full, red = emb.surface, emb.boundary
+    assert np.all(red.w > 0.0)
+    # NURBS-enhanced rules shrink about 4x; facet rules have few points per element anyway
+    assert red.w.size < (full.w.size / 3 if surface == "nurbs" else full.w.size)
+    group = lambda q: q.element * len(emb.patch_names) + q.patch  # noqa: E731
+    assert np.bincount(group(red)).max() <= 27
+    rows = {tuple(r) for r in np.column_stack([full.x, full.normal, full.element, full.patch]).round(15)}
+    assert all(tuple(r) in rows for r in np.column_stack([red.x, red.normal, red.element, red.patch]).round(15))
+    keys = np.unique(group(full))
+    m_full = _local_moments(emb.grid, keys, group(full), full.x, full.w, full.element, dim=2)
+    m_red = _local_moments(emb.grid, keys, group(red), red.x, red.w, red.element, dim=2)
+    assert np.abs(m_full - m_red).max() <= 1e-12 * np.abs(m_full[:, 0]).max()
+    assert np.allclose(np.bincount(red.patch, red.w), np.bincount(full.patch, full.w), rtol=1e-13)
+

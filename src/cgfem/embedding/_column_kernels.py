@@ -431,3 +431,29 @@ def column_rules(element_ids, elements_ijk, origin, h, shape, node_shape, s_x, s
             continue
         out_count[e] = k
         out_status[e] = OK
+
+
+@njit(cache=True, parallel=True)
+def recombine_groups(x, w, centre, half, offsets, out_w):
+    """Caratheodory recombination of every group ``offsets[g]:offsets[g + 1]`` of points
+    ``x`` (n, 3) with weights ``w`` (n,) -> ``out_w`` (n,): at most ``N_MOMENTS`` positive
+    weights per group with the group's tensor Legendre moments in the local coordinates
+    ``(x - centre[g]) / half``."""
+    for g in prange(offsets.shape[0] - 1):
+        a = offsets[g]
+        b = offsets[g + 1]
+        if b - a <= N_MOMENTS:
+            for i in range(a, b):
+                out_w[i] = w[i]
+            continue
+        phi = np.empty((b - a, N_MOMENTS))
+        xi = np.empty(3)
+        wl = np.empty(b - a)
+        for i in range(a, b):
+            for d in range(3):
+                xi[d] = (x[i, d] - centre[g, d]) / half
+            legendre_row(xi, phi[i - a])
+            wl[i - a] = max(w[i], 0.0)
+        recombine(phi, wl)
+        for i in range(a, b):
+            out_w[i] = wl[i - a]

@@ -9,7 +9,8 @@
   (:mod:`cgfem.embedding.moments`, exact too, but with points possibly outside the
   material and signed weights);
 - the surface rule on the exact NURBS boundary, per patch, with ``(xi, eta)``, outward
-  normals and owning elements (:mod:`cgfem.embedding.partition`).
+  normals and owning elements (:mod:`cgfem.embedding.partition`), and its reduction to at
+  most 27 points per element and patch for the weak form (:mod:`cgfem.embedding.reduce`).
 
 An element is cut when a piece of the boundary of positive area lies in it, whatever the
 signs of its nodes (a surface that enters and leaves through one face, a tube thinner than
@@ -28,6 +29,7 @@ from cgfem.embedding.columns import ColumnRules, LineHits, column_rules
 from cgfem.embedding.lines import cast_lines, cast_z_lines
 from cgfem.embedding.moments import DEFAULT_POINTS, VolumeRule, fitted_volume_rule
 from cgfem.embedding.partition import DEFAULT_TOL, SurfaceQuadrature, partition_surface
+from cgfem.embedding.reduce import reduced_surface
 from cgfem.geometry.bvh import SurfaceIndex
 from cgfem.geometry.inside import points_inside
 from cgfem.geometry.solid import Solid
@@ -44,6 +46,8 @@ class Embedding:
     volume : volume rule over the active (inside and cut) elements
     surface : boundary rule; ``surface.patch`` indexes ``patch_names``
     fallback : ids of the cut elements with a moment-fitted rule instead of a positive one
+    boundary : the reduced boundary rule for the weak form's boundary terms, at most 27
+        points of ``surface`` per element and patch (:mod:`cgfem.embedding.reduce`)
     """
 
     grid: CartesianGrid
@@ -52,6 +56,7 @@ class Embedding:
     surface: SurfaceQuadrature
     patch_names: tuple[str, ...]
     fallback: np.ndarray
+    boundary: SurfaceQuadrature
 
     @property
     def active_elements(self) -> np.ndarray:
@@ -171,4 +176,4 @@ def _assemble(grid: CartesianGrid, status: np.ndarray, rules: ColumnRules, fitte
     inner = _interior_rule(grid, np.flatnonzero(status == INSIDE))
     volume = VolumeRule(*(np.concatenate([getattr(inner, f), getattr(rules.volume, f), getattr(fitted, f)])
                           for f in ("x", "w", "element")))
-    return Embedding(grid, status, volume, surface, names, rules.fallback)
+    return Embedding(grid, status, volume, surface, names, rules.fallback, reduced_surface(grid, surface))

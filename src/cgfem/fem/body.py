@@ -60,7 +60,7 @@ class BodyModel:
         if body.body_force is not None:
             load += body_force_load(space, volume, body.body_force)
         dirichlet = []
-        surface, names = embedding.surface, embedding.patch_names
+        surface, names = embedding.boundary, embedding.patch_names
         for bc in boundary:
             points = BoundaryPoints.of(space, surface, surface_mask(surface, names, bc.patches))
             if isinstance(bc, DisplacementBC):
@@ -115,7 +115,7 @@ class BodyModel:
     def boundary_points(self) -> BoundaryPoints:
         """Every point of the boundary rule, grouped by element (built once)."""
         if self._boundary is None:
-            surface = self.embedding.surface
+            surface = self.embedding.boundary
             self._boundary = BoundaryPoints.of(self.space, surface, np.ones(surface.w.size, bool))
         return self._boundary
 
