@@ -10,6 +10,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from cgfem.embedding import _cone_kernels as _cones
+from cgfem.embedding._face_kernels import face_key, line_intervals
+
 #: Legendre polynomials per direction matched by the rules (degree <= 2 in each variable)
 N_POLY = 3
 N_MOMENTS = N_POLY**3
@@ -20,11 +23,11 @@ SIGN_EPS = 1e-12
 #: relative rank threshold of the Gauss-Jordan elimination in the recombination
 RANK_TOL = 1e-12
 #: accepted moment error of the recombined rule, relative to the element's material measure
-MOMENT_TOL = 1e-10
+MOMENT_TOL = 1e-9
 #: most elements in the stack of :func:`_stack_rule`
 MAX_STACK = 8
 
-OK, NO_DIRECTION, NOT_RECOMBINED = 0, 1, 2
+OK, NO_DIRECTION, NOT_RECOMBINED, CONES = 0, 1, 2, 3
 
 
 @njit(cache=True)
@@ -136,26 +139,6 @@ def recombine(phi, w):
 
 
 @njit(cache=True)
-def _line_intervals(l_start, l_off, l_coord, node_shape, axis, i_other, lo, hi, out):
-    """Material intervals within ``[lo, hi]`` of the grid line along ``axis`` through the
-    nodes whose indices are ``i_other`` (3,) on the other axes -> count written to ``out``."""
-    b = 1 if axis == 0 else 0
-    c = 1 if axis == 2 else 2
-    line = i_other[b] * node_shape[c] + i_other[c]
-    start = l_off[l_start[axis] + line]
-    stop = l_off[l_start[axis] + line + 1]
-    n = 0
-    for k in range(start, stop - 1, 2):
-        a0 = max(l_coord[k], lo)
-        a1 = min(l_coord[k + 1], hi)
-        if a1 > a0 and n < out.shape[0]:
-            out[n, 0] = a0
-            out[n, 1] = a1
-            n += 1
-    return n
-
-
-@njit(cache=True)
 def _graph_sign(normals, weights, first, stop, axis):
     """+1 (or -1) if the ``axis`` component of every normal ``first:stop`` with a positive
     weight is >= -eps (<= eps), preferring the sign of the weighted sum; 0 if neither."""
@@ -187,21 +170,6 @@ def _one_sign(normals, weights, first, stop, axis, sigma):
 
 
 @njit(cache=True)
-def _face_key(ijk, a, sigma, shape):
-    """Trim key of the face of element ``ijk`` on the ``sigma`` side along ``a``: ``a *
-    n_elements +`` the element below the face; -1 (no trims) if that face is the grid's
-    boundary."""
-    below = ijk[a] - (1 if sigma < 0 else 0)
-    if below < 0:
-        return -1
-    n_el = shape[0] * shape[1] * shape[2]
-    i = ijk[0] if a != 0 else below
-    j = ijk[1] if a != 1 else below
-    k = ijk[2] if a != 2 else below
-    return a * n_el + (i * shape[1] + j) * shape[2] + k
-
-
-@njit(cache=True)
 def _stack_rule(e_ijk, a, sigma, h, lo, shape, node_shape, element_ids, s_x, s_w, s_n, s_off,
                 t_key, l_start, l_off, l_coord, gx, gw):
     """Column rule of a cut element along ``a`` from the boundary points of the *stack* of
@@ -229,13 +197,13 @@ def _stack_rule(e_ijk, a, sigma, h, lo, shape, node_shape, element_ids, s_x, s_w
             stop[n_ranges] = s_off[r + 1]
             n_ranges += 1
             total += s_off[r + 1] - s_off[r]
-        key = _face_key(cur, a, sigma, shape)
+        key = face_key(cur, a, sigma, shape)
         t0 = np.searchsorted(t_key, key)
         if t0 == t_key.shape[0] or t_key[t0] != key:
             # no trimming curve: the far face is all material or none, as its edge along b
             nodes = cur.copy()
             nodes[a] += 1 if sigma > 0 else 0
-            if _line_intervals(l_start, l_off, l_coord, node_shape, b, nodes,
+            if line_intervals(l_start, l_off, l_coord, node_shape, b, nodes,
                                lo[b], lo[b] + h, intervals) == 0:
                 closed = True
                 break
@@ -301,7 +269,7 @@ def _column_rule(e_ijk, origin, h, shape, node_shape, element_ids, s_x, s_w, s_n
         if sigma == 0:
             continue
         # trims of the face on the sigma side (none on the grid's boundary)
-        key = _face_key(e_ijk, a, sigma, shape)
+        key = face_key(e_ijk, a, sigma, shape)
         t0 = np.searchsorted(t_key, key)
         t1 = np.searchsorted(t_key, key + 1)
         for ob in range(2):
@@ -314,7 +282,7 @@ def _column_rule(e_ijk, origin, h, shape, node_shape, element_ids, s_x, s_w, s_n
             nodes = e_ijk.copy()
             nodes[a] += 1 if sigma > 0 else 0
             nodes[b] += 1 if tau > 0 else 0
-            n_int = _line_intervals(l_start, l_off, l_coord, node_shape, c, nodes,
+            n_int = line_intervals(l_start, l_off, l_coord, node_shape, c, nodes,
                                     lo[c], lo[c] + h, intervals)
             ng = gx.shape[0]
             cap = ng * (s1 - s0) + ng * ng * (t1 - t0) + ng * ng * ng * n_int
@@ -388,6 +356,11 @@ def column_rules(element_ids, elements_ijk, origin, h, shape, node_shape, s_x, s
         ijk = elements_ijk[e].copy()
         x, w = _column_rule(ijk, origin, h, shape, node_shape, element_ids, s_x, s_w, s_n, s_off, e,
                             t_key, t_x, t_w, t_n, l_start, l_off, l_coord, gx, gw)
+        kind = OK
+        if w.shape[0] == 0:
+            x, w = _cones.cone_rule(ijk, origin, h, shape, node_shape, s_x, s_w, s_n, s_off[e], s_off[e + 1],
+                                    t_key, t_x, t_w, t_n, l_start, l_off, l_coord)
+            kind = CONES
         n = w.shape[0]
         out_full[e] = n
         out_count[e] = 0
@@ -430,7 +403,7 @@ def column_rules(element_ids, elements_ijk, origin, h, shape, node_shape, s_x, s
             out_status[e] = NOT_RECOMBINED
             continue
         out_count[e] = k
-        out_status[e] = OK
+        out_status[e] = kind
 
 
 @njit(cache=True, parallel=True)

@@ -21,9 +21,13 @@ The column rule has hundreds of points (two per boundary point). Caratheodory re
 with new positive weights and the same 27 tensor Legendre moments, so the final rule is as
 exact as the column rule, as small as a 3x3x3 Gauss rule, positive and inside.
 
-An element none of whose three axes makes its boundary a graph (two sheets of a surface
-thinner than the element, a saddle, a silhouette inside it) keeps the moment-fitted rule of
-:mod:`cgfem.embedding.moments`; :attr:`ColumnRules.fallback` lists them.
+An element none of whose three axes makes its boundary a graph (two sheets of a tube
+thinner than the element, a saddle, a silhouette inside it) is split into sub-tetrahedra
+instead: cones from its centroid over the exact surface and over its faces' material
+regions (:mod:`cgfem.embedding._cone_kernels`), positive when the material part is
+star-shaped from the centroid, then recombined the same way. An element where neither is
+positive keeps the moment-fitted rule of :mod:`cgfem.embedding.moments`;
+:attr:`ColumnRules.fallback` lists them.
 """
 
 from __future__ import annotations
@@ -39,7 +43,7 @@ from cgfem.embedding.moments import VolumeRule
 from cgfem.embedding.partition import SurfaceQuadrature, TrimQuadrature
 
 N_MOMENTS = _k.N_MOMENTS
-OK, NO_DIRECTION, NOT_RECOMBINED = _k.OK, _k.NO_DIRECTION, _k.NOT_RECOMBINED
+OK, NO_DIRECTION, NOT_RECOMBINED, CONES = _k.OK, _k.NO_DIRECTION, _k.NOT_RECOMBINED, _k.CONES
 
 
 @dataclass(frozen=True)
@@ -83,10 +87,11 @@ class ColumnRules:
     """Positive rules of cut elements.
 
     elements : (m,) the cut element ids, ascending
-    volume : the rules of the elements with ``status == OK`` (at most 27 points each)
-    status : (m,) OK, NO_DIRECTION (no height axis: moment-fitted fallback) or
-        NOT_RECOMBINED (the recombination lost accuracy: fallback)
-    full_points : (m,) number of points of the exact column rule
+    volume : the positive rules (at most 27 points each)
+    status : (m,) OK (from the column rule), CONES (from the sub-tetrahedra rule),
+        NO_DIRECTION (neither is positive: moment-fitted fallback) or NOT_RECOMBINED (the
+        recombination lost accuracy: fallback)
+    full_points : (m,) number of points of the exact column (or sub-tetrahedra) rule
     moments : (m, 27) its moments of the tensor Legendre polynomials in local coordinates
         ``(x - centre) / (h / 2)`` (zero for elements without one)
     """
@@ -100,7 +105,7 @@ class ColumnRules:
     @property
     def fallback(self) -> np.ndarray:
         """Ids of the cut elements without a positive rule."""
-        return self.elements[self.status != OK]
+        return self.elements[(self.status != OK) & (self.status != CONES)]
 
 
 def column_rules(grid: CartesianGrid, elements: np.ndarray, surface: SurfaceQuadrature,
