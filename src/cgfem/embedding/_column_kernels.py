@@ -23,7 +23,7 @@ SIGN_EPS = 1e-12
 #: relative rank threshold of the elimination in the recombination
 RANK_TOL = 1e-12
 #: accepted moment error of the recombined rule, relative to the element's material measure
-MOMENT_TOL = 1e-9
+MOMENT_TOL = 1e-10
 #: most elements in the stack of :func:`_stack_rule`
 MAX_STACK = 8
 
@@ -189,23 +189,28 @@ def recombine(phi, w, robust=False):
 
 
 @njit(cache=True)
-def recombine_checked(phi, w):
-    """:func:`recombine` with the fast null vectors, checked: if the moments moved by more
-    than ``MOMENT_TOL`` of the measure ``sum w``, again with the SVD ones. Returns the new
-    weights and whether the check passed (the input ``w`` is kept)."""
-    full = np.zeros(phi.shape[1])
+def moments(phi, w):
+    """``sum_i w_i phi_i`` (d,)."""
+    out = np.zeros(phi.shape[1])
     for i in range(w.shape[0]):
         for r in range(phi.shape[1]):
-            full[r] += w[i] * phi[i, r]
+            out[r] += w[i] * phi[i, r]
+    return out
+
+
+@njit(cache=True)
+def recombine_checked(phi, w, full):
+    """:func:`recombine` of the weights ``w`` with moments ``full`` using the fast null
+    vectors, checked: if the moments moved by more than ``MOMENT_TOL`` of the measure
+    ``full[0]``, again with the SVD ones. Returns the new weights and whether the check
+    passed (``w`` itself is kept)."""
     for attempt in range(2):
         out = w.copy()
         recombine(phi, out, attempt == 1)
+        got = moments(phi, out)
         err = 0.0
         for r in range(phi.shape[1]):
-            got = 0.0
-            for i in range(w.shape[0]):
-                got += out[i] * phi[i, r]
-            err = max(err, abs(got - full[r]))
+            err = max(err, abs(got[r] - full[r]))
         if np.count_nonzero(out) <= phi.shape[1] and err <= MOMENT_TOL * max(abs(full[0]), 1e-300):
             return out, True
     return w.copy(), False
@@ -240,6 +245,29 @@ def _one_sign(normals, weights, first, stop, axis, sigma):
         if weights[i] > 0.0 and sigma * normals[i, axis] < -SIGN_EPS:
             return False
     return True
+
+
+@njit(cache=True)
+def _surface_columns(s_x, s_w, s_n, first, stop, a, sigma, lo, h, gx, gw, x, w, m):
+    """Columns along ``a`` between the boundary points ``first:stop`` and the element face
+    on the ``-sigma`` side, clipped to the element ``[lo, lo + h]`` (points of elements
+    further along a stack give full columns), weighted by ``dA |n_a|``; appended to ``x, w``
+    from row ``m``; returns the new row count."""
+    for i in range(first, stop):
+        if s_w[i] <= 0.0:
+            continue
+        c0 = lo[a] if sigma > 0 else max(s_x[i, a], lo[a])
+        c1 = min(s_x[i, a], lo[a] + h) if sigma > 0 else lo[a] + h
+        if c1 <= c0:
+            continue
+        for g in range(gx.shape[0]):
+            x[m, 0] = s_x[i, 0]
+            x[m, 1] = s_x[i, 1]
+            x[m, 2] = s_x[i, 2]
+            x[m, a] = c0 + gx[g] * (c1 - c0)
+            w[m] = s_w[i] * abs(s_n[i, a]) * gw[g] * (c1 - c0)
+            m += 1
+    return m
 
 
 @njit(cache=True)
@@ -288,20 +316,7 @@ def _stack_rule(e_ijk, a, sigma, h, lo, shape, node_shape, element_ids, s_x, s_w
     w = np.empty(ng * total)
     m = 0
     for r in range(n_ranges):
-        for i in range(first[r], stop[r]):
-            if s_w[i] <= 0.0:
-                continue
-            c0 = lo[a] if sigma > 0 else max(s_x[i, a], lo[a])
-            c1 = min(s_x[i, a], lo[a] + h) if sigma > 0 else lo[a] + h
-            if c1 <= c0:
-                continue
-            for g in range(ng):
-                x[m, 0] = s_x[i, 0]
-                x[m, 1] = s_x[i, 1]
-                x[m, 2] = s_x[i, 2]
-                x[m, a] = c0 + gx[g] * (c1 - c0)
-                w[m] = s_w[i] * abs(s_n[i, a]) * gw[g] * (c1 - c0)
-                m += 1
+        m = _surface_columns(s_x, s_w, s_n, first[r], stop[r], a, sigma, lo, h, gx, gw, x, w, m)
     return x[:m], w[:m]
 
 
@@ -328,13 +343,11 @@ def _column_rule(e_ijk, origin, h, shape, node_shape, element_ids, s_x, s_w, s_n
     lo = np.empty(3)
     for d in range(3):
         lo[d] = origin[d] + e_ijk[d] * h
-    order = np.empty(3, np.int64)
-    score = np.zeros(3)
+    score = np.zeros(3)  # axes by the size of the projected area, largest first
     for d in range(3):
         for i in range(s0, s1):
             score[d] += s_w[i] * s_n[i, d]
-    sabs = np.abs(score)
-    order[:] = np.argsort(-sabs)
+    order = np.argsort(-np.abs(score))
     intervals = np.empty((8, 2))
     for oa in range(3):
         a = order[oa]
@@ -361,20 +374,8 @@ def _column_rule(e_ijk, origin, h, shape, node_shape, element_ids, s_x, s_w, s_n
             cap = ng * (s1 - s0) + ng * ng * (t1 - t0) + ng * ng * ng * n_int
             x = np.empty((cap, 3))
             w = np.empty(cap)
-            m = 0
-            for i in range(s0, s1):  # columns under (sigma > 0) or over the surface points
-                if s_w[i] <= 0.0:
-                    continue
-                top = s_x[i, a]
-                c0 = lo[a] if sigma > 0 else top
-                c1 = top if sigma > 0 else lo[a] + h
-                for g in range(ng):
-                    x[m, 0] = s_x[i, 0]
-                    x[m, 1] = s_x[i, 1]
-                    x[m, 2] = s_x[i, 2]
-                    x[m, a] = c0 + gx[g] * (c1 - c0)
-                    w[m] = s_w[i] * abs(s_n[i, a]) * gw[g] * (c1 - c0)
-                    m += 1
+            # columns under (sigma > 0) or over the surface points
+            m = _surface_columns(s_x, s_w, s_n, s0, s1, a, sigma, lo, h, gx, gw, x, w, 0)
             # the face region R: 2D points (b, c) with weights, then full columns along a
             n2 = ng * (t1 - t0) + ng * ng * n_int
             p2 = np.empty((n2, 2))
@@ -421,7 +422,7 @@ def column_rules(element_ids, elements_ijk, origin, h, shape, node_shape, s_x, s
     """Positive rules of at most ``N_MOMENTS`` points for every cut element (ids
     ``element_ids``, ascending, indices ``elements_ijk``; boundary points of row ``e`` are
     ``s_off[e]:s_off[e + 1]``): ``out_x`` (m, N_MOMENTS, 3), ``out_w``, ``out_count`` (m,),
-    ``out_status`` (m,) OK / NO_DIRECTION / NOT_RECOMBINED, ``out_full`` (m,) the size of
+    ``out_status`` (m,) OK / CONES / NO_DIRECTION / NOT_RECOMBINED, ``out_full`` (m,) the size of
     the exact column rule and ``out_moments`` (m, N_MOMENTS) its local Legendre moments."""
     m = elements_ijk.shape[0]
     half = 0.5 * h
@@ -451,13 +452,9 @@ def column_rules(element_ids, elements_ijk, origin, h, shape, node_shape, s_x, s
                 xi[d] = (x[i, d] - centre[d]) / half
             legendre_row(xi, phi[i])
             wl[i] = w[i] / half**3
-        full = np.zeros(N_MOMENTS)
-        for i in range(n):
-            for r in range(N_MOMENTS):
-                full[r] += wl[i] * phi[i, r]
-        for r in range(N_MOMENTS):
-            out_moments[e, r] = full[r]
-        wl, ok = recombine_checked(phi, wl)
+        full = moments(phi, wl)
+        out_moments[e, :] = full
+        wl, ok = recombine_checked(phi, wl, full)
         if not ok:
             out_status[e] = NOT_RECOMBINED
             continue
@@ -493,6 +490,6 @@ def recombine_groups(x, w, centre, half, offsets, out_w):
                 xi[d] = (x[i, d] - centre[g, d]) / half
             legendre_row(xi, phi[i - a])
             wl[i - a] = max(w[i], 0.0)
-        wl, ok = recombine_checked(phi, wl)
+        wl, ok = recombine_checked(phi, wl, moments(phi, wl))
         for i in range(a, b):
             out_w[i] = wl[i - a]  # the group unreduced if the recombination failed

@@ -64,6 +64,10 @@ class VolumeRule:
     w: np.ndarray
     element: np.ndarray
 
+    @classmethod
+    def empty(cls) -> "VolumeRule":
+        return cls(np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int64))
+
 
 def fitted_volume_rule(grid: CartesianGrid, elements: np.ndarray,
                        surf_x, surf_w, surf_nx, surf_element,
@@ -81,7 +85,7 @@ def fitted_volume_rule(grid: CartesianGrid, elements: np.ndarray,
     elements = np.asarray(elements, np.int64)
     m = elements.size
     if m == 0:
-        return VolumeRule(np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int64))
+        return VolumeRule.empty()
     h = grid.h
     ijk = grid.element_ijk(elements)
     centre = grid.element_center(ijk)

@@ -20,6 +20,7 @@ the element); otherwise it is inside or outside as its nodes are.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -46,8 +47,6 @@ class Embedding:
     volume : volume rule over the active (inside and cut) elements
     surface : boundary rule; ``surface.patch`` indexes ``patch_names``
     fallback : ids of the cut elements with a moment-fitted rule instead of a positive one
-    boundary : the reduced boundary rule for the weak form's boundary terms, at most 27
-        points of ``surface`` per element and patch (:mod:`cgfem.embedding.reduce`)
     """
 
     grid: CartesianGrid
@@ -56,7 +55,13 @@ class Embedding:
     surface: SurfaceQuadrature
     patch_names: tuple[str, ...]
     fallback: np.ndarray
-    boundary: SurfaceQuadrature
+
+    @cached_property
+    def boundary(self) -> SurfaceQuadrature:
+        """The reduced boundary rule for the weak form's boundary terms: at most 27 points
+        of ``surface`` per element and patch (:mod:`cgfem.embedding.reduce`), built on
+        first use."""
+        return reduced_surface(self.grid, self.surface)
 
     @property
     def active_elements(self) -> np.ndarray:
@@ -130,12 +135,11 @@ def embed(solid: Solid, grid: CartesianGrid, surface: str = "nurbs", tol: float 
     names = tuple(p.name for p in solid.patches)
     if surface == "facets":
         parts = facet_embedding_parts(solid, grid, index)
-        cut = parts.cut
-        args = parts.fitted_volume_args(points)
         # the column integrands have degree 2 points + 1 on the triangles, like the moments'
         exact = parts.surface if parts.degree >= 2 * points + 1 else parts.surface_rule(2 * points + 1)
-        rules = column_rules(grid, cut, exact, parts.trims, parts.line_hits())
-        fitted = _fallback_rule(grid, rules, args, points)
+        rules = column_rules(grid, parts.cut, exact, parts.trims, parts.line_hits())
+        fitted = _fallback_rule(grid, rules, parts.fitted_volume_args(points) if rules.fallback.size else None,
+                                points)
         return _assemble(grid, parts.status, rules, fitted, parts.surface, names)
     z_lines = cast_z_lines(index, grid)
     part = partition_surface(solid, grid, tol)
@@ -161,9 +165,12 @@ def embed(solid: Solid, grid: CartesianGrid, surface: str = "nurbs", tol: float 
     return _assemble(grid, status, rules, fitted, part.surface, names)
 
 
-def _fallback_rule(grid: CartesianGrid, rules: ColumnRules, args: dict, points: int) -> VolumeRule:
+def _fallback_rule(grid: CartesianGrid, rules: ColumnRules, args: dict | None, points: int) -> VolumeRule:
     """Moment-fitted rules of the elements of ``rules.fallback`` (``args``: the boundary
-    data of all cut elements, :func:`fitted_volume_rule`'s keywords)."""
+    data of all cut elements, :func:`fitted_volume_rule`'s keywords; None if there are no
+    fallback elements)."""
+    if args is None:
+        return VolumeRule.empty()
     pick = np.isin(args["elements"], rules.fallback)
     args = dict(args, elements=args["elements"][pick],
                 edge_intervals=[iv for iv, p in zip(args["edge_intervals"], pick) if p])
@@ -176,4 +183,4 @@ def _assemble(grid: CartesianGrid, status: np.ndarray, rules: ColumnRules, fitte
     inner = _interior_rule(grid, np.flatnonzero(status == INSIDE))
     volume = VolumeRule(*(np.concatenate([getattr(inner, f), getattr(rules.volume, f), getattr(fitted, f)])
                           for f in ("x", "w", "element")))
-    return Embedding(grid, status, volume, surface, names, rules.fallback, reduced_surface(grid, surface))
+    return Embedding(grid, status, volume, surface, names, rules.fallback)

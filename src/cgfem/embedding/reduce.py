@@ -25,11 +25,10 @@ from cgfem.embedding.partition import SurfaceQuadrature
 def reduced_surface(grid: CartesianGrid, surface: SurfaceQuadrature) -> SurfaceQuadrature:
     """At most 27 points of ``surface`` per (element, patch), positive weights, the same
     moments of polynomials of degree <= 2 in each variable (module docstring)."""
-    keep = surface.w > 0.0
-    rows = np.flatnonzero(keep)
+    rows = np.flatnonzero(surface.w > 0.0)
     key = surface.element[rows] * (int(surface.patch.max(initial=0)) + 1) + surface.patch[rows]
-    order = rows[np.argsort(key, kind="stable")]
-    key = np.sort(key, kind="stable")
+    by_key = np.argsort(key, kind="stable")
+    order, key = rows[by_key], key[by_key]
     starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]]) if key.size else np.zeros(0, np.int64)
     offsets = np.r_[starts, key.size].astype(np.int64)
     centre = grid.element_center(grid.element_ijk(surface.element[order[starts]])) if key.size \
