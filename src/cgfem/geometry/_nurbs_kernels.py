@@ -107,11 +107,34 @@ def ders_basis_funs(i, u, p, n, U, ders):
 
 
 @njit(cache=True)
-def _binomial(n, k):
+def binomial(n, k):
+    """Binomial coefficient ``C(n, k)`` as a float (``0 <= k <= n``)."""
     c = 1.0
     for j in range(1, k + 1):
         c = c * (n - k + j) / j
     return c
+
+
+@njit(cache=True)
+def contract_net(Pw, i0, j0, Nu, Nv, p, q, d, temp, SKLw):
+    """Homogeneous derivatives ``SKLw[k, l]`` (4-vectors, ``k + l <= d``) of the tensor
+    product of the basis derivatives ``Nu`` (>= d + 1, >= p + 1) and ``Nv`` (>= d + 1, >= q + 1)
+    with the window ``Pw[i0 : i0 + p + 1, j0 : j0 + q + 1]`` of a homogeneous net (inner loop
+    of A3.6). Scratch ``temp`` (>= q + 1, 4); other entries of ``SKLw`` are left as they are.
+    Shared by NURBS surfaces (B-spline basis) and Bezier leaves (Bernstein basis)."""
+    for k in range(d + 1):
+        for s in range(q + 1):
+            for c in range(4):
+                acc = 0.0
+                for r in range(p + 1):
+                    acc += Nu[k, r] * Pw[i0 + r, j0 + s, c]
+                temp[s, c] = acc
+        for l in range(d - k + 1):
+            for c in range(4):
+                acc = 0.0
+                for s in range(q + 1):
+                    acc += Nv[l, s] * temp[s, c]
+                SKLw[k, l, c] = acc
 
 
 @njit(cache=True)
@@ -126,55 +149,30 @@ def surface_derivs_homogeneous(p, q, U, V, Pw, u, v, d, SKLw):
     Nv = np.empty((d + 1, q + 1))
     ders_basis_funs(uspan, u, p, d, U, Nu)
     ders_basis_funs(vspan, v, q, d, V, Nv)
-    temp = np.empty((q + 1, 4))
     for k in range(d + 1):
         for l in range(d + 1):
             for c in range(4):
                 SKLw[k, l, c] = 0.0
-    for k in range(d + 1):
-        for s in range(q + 1):
-            for c in range(4):
-                acc = 0.0
-                for r in range(p + 1):
-                    acc += Nu[k, r] * Pw[uspan - p + r, vspan - q + s, c]
-                temp[s, c] = acc
-        for l in range(d - k + 1):
-            for c in range(4):
-                acc = 0.0
-                for s in range(q + 1):
-                    acc += Nv[l, s] * temp[s, c]
-                SKLw[k, l, c] = acc
+    contract_net(Pw, uspan - p, vspan - q, Nu, Nv, p, q, d, np.empty((q + 1, 4)), SKLw)
 
 
 @njit(cache=True)
 def rat_surface_derivs(SKLw, d, SKL):
     """A4.4 RatSurfaceDerivs: Cartesian derivatives ``SKL[k, l]`` (3-vectors, ``k + l <= d``)
-    from the homogeneous ones ``SKLw``."""
-    v = np.empty(3)
-    v2 = np.empty(3)
+    from the homogeneous ones ``SKLw``. The one quotient rule of the package (NURBS surfaces
+    and Bezier leaves); allocation-free, for hot loops."""
     for k in range(d + 1):
         for l in range(d - k + 1):
             for c in range(3):
-                v[c] = SKLw[k, l, c]
-            for j in range(1, l + 1):
-                b = _binomial(l, j) * SKLw[0, j, 3]
-                for c in range(3):
-                    v[c] -= b * SKL[k, l - j, c]
-            for i in range(1, k + 1):
-                b = _binomial(k, i) * SKLw[i, 0, 3]
-                for c in range(3):
-                    v[c] -= b * SKL[k - i, l, c]
-                for c in range(3):
-                    v2[c] = 0.0
+                v = SKLw[k, l, c]
                 for j in range(1, l + 1):
-                    b2 = _binomial(l, j) * SKLw[i, j, 3]
-                    for c in range(3):
-                        v2[c] += b2 * SKL[k - i, l - j, c]
-                b = _binomial(k, i)
-                for c in range(3):
-                    v[c] -= b * v2[c]
-            for c in range(3):
-                SKL[k, l, c] = v[c] / SKLw[0, 0, 3]
+                    v -= binomial(l, j) * SKLw[0, j, 3] * SKL[k, l - j, c]
+                for i in range(1, k + 1):
+                    v2 = SKLw[i, 0, 3] * SKL[k - i, l, c]
+                    for j in range(1, l + 1):
+                        v2 += binomial(l, j) * SKLw[i, j, 3] * SKL[k - i, l - j, c]
+                    v -= binomial(k, i) * v2
+                SKL[k, l, c] = v / SKLw[0, 0, 3]
 
 
 @njit(cache=True)

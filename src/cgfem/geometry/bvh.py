@@ -17,7 +17,8 @@ resulting *leaf* is a self-contained rational Bezier patch, stored in flat array
   interval of ``m . P`` over its control points (inflated alike): the leaf lies in this slab,
   a tighter bound than the box for a nearly flat leaf.
 
-Inside a leaf, the kernels of :mod:`cgfem.geometry.query` work with the local parameters
+Inside a leaf, the kernels of :mod:`cgfem.geometry.query` (they take the arrays as one
+:class:`BvhArrays`) work with the local parameters
 ``(s, t)`` in ``[0, 1]^2``: ``u = u0 + s (u1 - u0)``, ``v = v0 + t (v1 - v0)``.
 
 The hierarchy is a binary tree in flat arrays, nodes in depth-first order (node 0 is the
@@ -31,6 +32,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -45,6 +47,24 @@ BOX_INFLATION = 1e-10
 LEAVES_PER_NODE = 4
 #: Normals sampled per direction to estimate a leaf's normal cone.
 _ANGLE_SAMPLES = 5
+
+
+class BvhArrays(NamedTuple):
+    """The arrays of a :class:`SurfaceIndex` that the query kernels read, as one argument
+    (numba takes a named tuple of arrays); layout in the module docstring."""
+
+    node_lo: np.ndarray
+    node_hi: np.ndarray
+    node_child: np.ndarray
+    node_start: np.ndarray
+    node_count: np.ndarray
+    leaf_lo: np.ndarray
+    leaf_hi: np.ndarray
+    leaf_axis: np.ndarray
+    leaf_slab: np.ndarray
+    leaf_degree: np.ndarray
+    leaf_offset: np.ndarray
+    control: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -154,11 +174,9 @@ class SurfaceIndex:
         net = self.control[self.leaf_offset[k]: self.leaf_offset[k + 1]].reshape(p + 1, q + 1, 4)
         return NurbsSurface((p, q), np.repeat([u0, u1], p + 1), np.repeat([v0, v1], q + 1), net)
 
-    def kernel_args(self) -> tuple:
-        """The arrays the query kernels take, in their order."""
-        return (self.node_lo, self.node_hi, self.node_child, self.node_start, self.node_count,
-                self.leaf_lo, self.leaf_hi, self.leaf_axis, self.leaf_slab, self.leaf_degree,
-                self.leaf_offset, self.control)
+    def arrays(self) -> BvhArrays:
+        """The arrays the query kernels take, as one :class:`BvhArrays`."""
+        return BvhArrays(**{name: getattr(self, name) for name in BvhArrays._fields})
 
 
 def as_index(index_or_solid) -> SurfaceIndex:
