@@ -1,0 +1,183 @@
+"""Normal gap of a slave point, its first and second derivatives (paper eqs. 2-10, 28-30).
+
+Every surface definition is reduced here to one local form, per slave point ``p``:
+
+- the **slave point** moves with the 24 dofs ``U1`` of its element (8 nodes x 3, node-major):
+  ``x1 = X1 + U1^T phi1`` and its two tangent vectors ``a = A + U1^T ca``,
+  ``b = B + U1^T cb`` (``A x B`` points out of the slave body). The current normal is
+  ``n = m / |m|`` with ``m = a x b`` (eq. 3). For NURBS+FE ``A, B = Q_xi, Q_eta``,
+  ``phi1 = N(zeta)``, ``ca = grad N . Q_xi`` (eq. 16); for facets ``A, B`` are two edges of the
+  triangle and ``phi1, ca, cb`` mix the shape values at its vertices (eq. 11 on the
+  displaced triangle).
+- the **master point** at convective coordinates ``theta = (xi, eta)`` moves with the 24
+  dofs ``U2`` of the master element holding it: ``x2(theta) = Q(theta) + U2^T phi2(theta)``
+  with tangents ``t_alpha = x2_{,alpha}``, second derivatives ``s_{alpha beta}`` and
+  ``d t_alpha / d U2 = psi_alpha`` (eqs. 16-17).
+
+The ray-tracing pairing ``x2(theta) = x1 + g n`` (eq. 2) defines ``theta`` and the gap
+``g`` implicitly as functions of the 48 local dofs ``v = (U1, U2)``. With
+``F(theta, g; v) = x2(theta) - x1 - g n`` and ``J = [t_xi, t_eta, -n]`` the implicit
+function theorem gives ``(theta, g)_{,v} = -J^{-1} F_{,v}`` (the system of eqs. 5 and 9,
+solved in one piece), and differentiating once more (eqs. 28-30)
+
+    g_{,ij} = -q . [ s_{ab} th^a_i th^b_j + t_{a,j} th^a_i + t_{a,i} th^a_j
+                     - n_{,j} g_{,i} - n_{,i} g_{,j} - g n_{,ij} ],
+
+with ``q = J^{-T} e_3 = -m2 / (m2 . n)`` (``m2 = t_xi x t_eta``), so that ``g_{,v} = -q . F_{,v}``:
+exactly the variations of eq. (5), ``dg = (dx2 - dx1) . n`` with the convective terms.
+All quantities are exact: the tangent built from them is the consistent one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+_E = np.eye(3)
+#: Levi-Civita products e_k x e_l, (3, 3, 3)
+_CROSS = np.cross(_E[:, None, :], _E[None, :, :])
+
+
+@dataclass(frozen=True)
+class SlaveFrames:
+    """Reference data of slave points (n of them).
+
+    slot : (n,) active element of the slave space holding each point
+    X : (n, 3) reference positions; A, B : (n, 3) reference tangents, ``A x B`` outward
+    phi, ca, cb : (n, 8) coefficients of ``x1``, ``a`` and ``b`` on the element's nodal values
+    w : (n,) reference area weights
+    """
+
+    slot: np.ndarray
+    X: np.ndarray
+    A: np.ndarray
+    B: np.ndarray
+    phi: np.ndarray
+    ca: np.ndarray
+    cb: np.ndarray
+    w: np.ndarray
+
+    @property
+    def size(self) -> int:
+        return int(self.slot.size)
+
+    def select(self, rows: np.ndarray) -> "SlaveFrames":
+        return SlaveFrames(*(getattr(self, f)[rows] for f in
+                             ("slot", "X", "A", "B", "phi", "ca", "cb", "w")))
+
+
+@dataclass(frozen=True)
+class SlaveState:
+    """Current slave geometry: position ``x`` (n, 3), tangents ``a, b`` (n, 3), ``m = a x b``,
+    unit normal ``n`` (n, 3) and ``|m|`` (n,)."""
+
+    x: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    m: np.ndarray
+    n: np.ndarray
+    norm_m: np.ndarray
+
+
+def slave_state(frames: SlaveFrames, U1: np.ndarray) -> SlaveState:
+    """Current slave geometry from the element displacements ``U1`` (n, 8, 3)."""
+    x = frames.X + np.einsum("pa,pak->pk", frames.phi, U1)
+    a = frames.A + np.einsum("pa,pak->pk", frames.ca, U1)
+    b = frames.B + np.einsum("pa,pak->pk", frames.cb, U1)
+    m = np.cross(a, b)
+    r = np.linalg.norm(m, axis=1)
+    return SlaveState(x, a, b, m, m / r[:, None], r)
+
+
+@dataclass(frozen=True)
+class MasterPoints:
+    """The master surface at the paired points (n of them), current configuration.
+
+    x : (n, 3) position; t : (n, 2, 3) tangents ``x_{,xi}``, ``x_{,eta}``;
+    s : (n, 2, 2, 3) second derivatives; phi : (n, 8) ``dx/dU2``; psi : (n, 2, 8)
+    ``dt_alpha/dU2``; slot : (n,) master element; normal : (n, 3) outward unit normal
+    """
+
+    x: np.ndarray
+    t: np.ndarray
+    s: np.ndarray
+    phi: np.ndarray
+    psi: np.ndarray
+    slot: np.ndarray
+    normal: np.ndarray
+
+
+@dataclass(frozen=True)
+class GapDerivatives:
+    """``g`` (n,), ``g_{,v}`` (n, 48) and ``g_{,vv}`` (n, 48, 48) on ``v = (U1, U2)``, and
+    the current area weight ``w`` (n,) with its derivative ``w_{,v}`` (n, 48)."""
+
+    g: np.ndarray
+    dg: np.ndarray
+    d2g: np.ndarray
+    w: np.ndarray
+    dw: np.ndarray
+
+
+def gap_derivatives(frames: SlaveFrames, slave: SlaveState, master: MasterPoints, g: np.ndarray,
+                    current_area: bool, second: bool = True) -> GapDerivatives:
+    """Derivatives of the ray-traced gap ``g`` (module docstring) at ``n`` paired points.
+
+    ``current_area``: the weight is the current area ``w0 |a x b| / |A x B|`` (finite
+    strain) instead of the reference one."""
+    n_pts = g.size
+    n, m, r = slave.n, slave.m, slave.norm_m
+    # dm/dU1[a, k] = ca_a (e_k x b) + cb_a (a x e_k)       (n, 8, 3, 3): [p, node, k, vector]
+    ek_x_b = np.cross(_E[None, :, :], slave.b[:, None, :])          # (n, 3, 3)
+    a_x_ek = np.cross(slave.a[:, None, :], _E[None, :, :])
+    dm = (frames.ca[:, :, None, None] * ek_x_b[:, None] + frames.cb[:, :, None, None] * a_x_ek[:, None])
+    dm = dm.reshape(n_pts, 24, 3)
+    m_dm = np.einsum("pk,pik->pi", m, dm)                           # m . m_i
+    dn = dm / r[:, None, None] - m[:, None, :] * (m_dm / r[:, None] ** 3)[:, :, None]
+    # F_v (3, 48): dF/dU1 = -phi1 e_k - g n_i ; dF/dU2 = phi2 e_k
+    Fv = np.zeros((n_pts, 3, 48))
+    Fv[:, :, :24] = -np.einsum("pa,kc->pcak", frames.phi, _E).reshape(n_pts, 3, 24) \
+        - g[:, None, None] * dn.transpose(0, 2, 1)
+    Fv[:, :, 24:] = np.einsum("pa,kc->pcak", master.phi, _E).reshape(n_pts, 3, 24)
+    J = np.stack([master.t[:, 0], master.t[:, 1], -n], axis=2)     # columns
+    theta = -np.linalg.solve(J, Fv)                                 # (n, 3, 48)
+    m2 = np.cross(master.t[:, 0], master.t[:, 1])
+    q = -m2 / np.einsum("pk,pk->p", m2, n)[:, None]
+    dg = theta[:, 2]
+    w0 = frames.w
+    R = np.linalg.norm(np.cross(frames.A, frames.B), axis=1)
+    if current_area:
+        w = w0 * r / R
+        dw = np.zeros((n_pts, 48))
+        dw[:, :24] = (w0 / R)[:, None] * np.einsum("pk,pik->pi", n, dm)
+    else:
+        w, dw = w0.copy(), np.zeros((n_pts, 48))
+    if not second:
+        return GapDerivatives(g, dg, np.zeros((n_pts, 0, 0)), w, dw)
+    th = theta[:, :2]                                               # (n, 2, 48)
+    qs = np.einsum("pk,pabk->pab", q, master.s)
+    d2g = np.einsum("pab,pai,pbj->pij", qs, th, th)
+    # q . dt_alpha/dv_j: only on U2 dofs, psi_alpha[a] q_k
+    qt = np.zeros((n_pts, 2, 48))
+    qt[:, :, 24:] = np.einsum("pca,pk->pcak", master.psi, q).reshape(n_pts, 2, 24)
+    cross = np.einsum("pai,paj->pij", th, qt)
+    d2g += cross + cross.transpose(0, 2, 1)
+    qdn = np.zeros((n_pts, 48))
+    qdn[:, :24] = np.einsum("pk,pik->pi", q, dn)
+    outer = dg[:, :, None] * qdn[:, None, :]
+    d2g -= outer + outer.transpose(0, 2, 1)
+    # - g q . n_ij on the slave block (second derivative of the normal)
+    c = frames.ca[:, :, None] * frames.cb[:, None, :]
+    c = c - c.transpose(0, 2, 1)                                    # (n, 8, 8)
+    d2m = np.einsum("pac,klv->pakclv", c, _CROSS).reshape(n_pts, 24, 24, 3)
+    qm = np.einsum("pk,pk->p", q, m)
+    q_dm = np.einsum("pk,pik->pi", q, dm)
+    r3 = r ** 3
+    qn2 = (np.einsum("pk,pijk->pij", q, d2m) / r[:, None, None]
+           - (q_dm[:, :, None] * m_dm[:, None, :] + m_dm[:, :, None] * q_dm[:, None, :]) / r3[:, None, None]
+           - qm[:, None, None] * (np.einsum("pik,pjk->pij", dm, dm)
+                                  + np.einsum("pk,pijk->pij", m, d2m)) / r3[:, None, None]
+           + 3.0 * (qm / r ** 5)[:, None, None] * m_dm[:, :, None] * m_dm[:, None, :])
+    d2g[:, :24, :24] -= g[:, None, None] * qn2
+    return GapDerivatives(g, dg, -d2g, w, dw)

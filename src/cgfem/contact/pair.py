@@ -1,0 +1,203 @@
+"""One contact pair: slave points, ray tracing onto the master, residual and tangent.
+
+Stabilized Lagrangian with the condensed multiplier (paper eqs. 23-27). At every slave
+quadrature point ``g`` (weight ``w``)
+
+    lambda_N = p_N + eps g_N         if p_N + eps g_N <= 0   (active; compression < 0)
+    lambda_N = 0                     otherwise,                eps = kappa E_slave / h_slave,
+
+with ``p_N = n . sigma* . n`` the normal stress of the slave's recovered (SPR) Cauchy stress
+at the point. The contact virtual work ``sum_g w lambda_N delta g_N`` enters the residual
+``r = f_int - f_ext + sum_g w lambda_N g_{N,v}`` (a compressive ``lambda_N`` pushes the slave
+away from the master), and the consistent tangent is
+
+    K_c = sum_g w eps g_{,v} g_{,v}^T + w lambda_N g_{,vv} + lambda_N g_{,v} w_{,v}^T
+
+(:mod:`cgfem.contact.kinematics`). In finite strain ``w`` is the current area of the slave
+point (``lambda_N`` is a Cauchy traction) and the last term makes ``K_c`` non-symmetric; in
+small strain ``w`` is the reference area and ``K_c`` is symmetric.
+
+``p_N`` is frozen during a Newton solve, like the recovered stress of the weak Dirichlet
+conditions: :meth:`ContactPair.freeze` computes it from ``sigma*`` and the current normal at
+the start of each pass of the outer loop, which refreshes both.
+
+The active set is re-evaluated at every residual evaluation (a semismooth Newton method).
+Chattering protection: once a point has switched :data:`MAX_SWITCHES` times within one
+load increment, its tangent contribution is held active for the rest of the increment,
+while its residual stays exact: the converged solution is unchanged, only the convergence
+rate of that point is given up.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cgfem.contact.kinematics import SlaveFrames, gap_derivatives, slave_state
+from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface, RayHits, element_values, shape_derivatives
+
+#: switches of one point's active status in one increment before its tangent is held active
+MAX_SWITCHES = 4
+#: largest |gap| searched, in slave element sizes
+MAX_GAP_H = 2.0
+
+
+@dataclass
+class ContactState:
+    """Per slave point: the frozen stabilizing stress ``p_N``, the last pairing, the last
+    active status and the switch count of the increment."""
+
+    p_N: np.ndarray
+    hits: RayHits | None = None
+    active: np.ndarray | None = None
+    switches: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class ContactPoints:
+    """Slave points of a pair in the current configuration (what ``contact_NNN.vtu`` shows).
+
+    x (n, 3), normal (n, 3), gap (n,) (NaN: no master hit), pressure (n,) lambda_N (Pa,
+    negative in compression, 0 where inactive), active (n,) bool, weight (n,) area weight
+    (so that ``sum pressure * weight * normal`` is the contact force on the slave)
+    """
+
+    x: np.ndarray
+    normal: np.ndarray
+    gap: np.ndarray
+    pressure: np.ndarray
+    active: np.ndarray
+    weight: np.ndarray
+    p_N: np.ndarray
+
+    @property
+    def force(self) -> np.ndarray:
+        """Force (3,) the master exerts on the slave."""
+        return (self.pressure * self.weight) @ self.normal
+
+
+@dataclass
+class ContactPair:
+    """A slave body's points against a master body's surface.
+
+    slave, master : index of the bodies in the system
+    frames : slave point data; grad_N (n, 8, 3) shape gradients at the slave points
+    """
+
+    name: str
+    slave: int
+    master: int
+    slave_space: object
+    master_space: object
+    frames: SlaveFrames
+    grad_N: np.ndarray
+    surface: NurbsFeSurface | FacetSurface
+    eps: float
+    finite: bool
+    max_gap: float
+    state: ContactState = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.state = ContactState(np.zeros(self.frames.size))
+
+    @property
+    def n_points(self) -> int:
+        return self.frames.size
+
+    # -- kinematics ------------------------------------------------------------------------
+    def _slave(self, u_s: np.ndarray):
+        U1 = element_values(self.slave_space, u_s, self.frames.slot)
+        return U1, slave_state(self.frames, U1)
+
+    def search(self, u_s: np.ndarray, u_m: np.ndarray) -> tuple:
+        """Current slave geometry and its master hits (the previous pairing first)."""
+        U1, st = self._slave(u_s)
+        hits = self.surface.search(u_m, st.x, st.n, self.max_gap, self.state.hits)
+        return U1, st, hits
+
+    def freeze(self, u_s: np.ndarray, recovered: np.ndarray | None) -> None:
+        """Freeze ``p_N = n . sigma* . n`` at the slave points from the slave's recovered
+        stress (nodal, (n_nodes, 3, 3): Cauchy in small strain, first Piola-Kirchhoff in
+        finite strain) and the current normal; ``None``: ``p_N = 0`` (first pass)."""
+        if recovered is None:
+            self.state.p_N = np.zeros(self.n_points)
+            return
+        U1, st = self._slave(u_s)
+        nodal = recovered[self.slave_space.connectivity[self.frames.slot]]      # (n, 8, 3, 3)
+        stress = np.einsum("pa,paij->pij", self.frames.phi, nodal)
+        if self.finite:
+            F = np.eye(3) + np.einsum("pak,paj->pkj", U1, self.grad_N)
+            stress = np.einsum("pij,pkj->pik", stress, F) / np.linalg.det(F)[:, None, None]
+        self.state.p_N = np.einsum("pi,pij,pj->p", st.n, stress, st.n)
+
+    def begin_increment(self) -> None:
+        self.state.switches = np.zeros(self.n_points, np.int64)
+
+    # -- residual and tangent --------------------------------------------------------------
+    def assemble(self, u_s: np.ndarray, u_m: np.ndarray, tangent: bool, update: bool = True):
+        """Residual contributions ``(r_s (n_s,), r_m (n_m,))`` and, if asked, the tangent as
+        COO triplets ``(rows, cols, values)`` on the local dofs ``(slave dofs, master dofs
+        + n_s)``. ``update``: record the pairing and active set (a Newton iterate)."""
+        U1, st, hits = self.search(u_s, u_m)
+        lam, active = self._multiplier(hits)
+        if update:
+            self._record(hits, active)
+        held = active.copy()
+        if self.state.switches is not None:
+            held |= self.state.switches >= MAX_SWITCHES
+        r_s = np.zeros(u_s.size)
+        r_m = np.zeros(u_m.size)
+        rows = np.flatnonzero(held & hits.found)
+        triplets = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+        if rows.size == 0:
+            return r_s, r_m, (triplets if tangent else None)
+        frames = self.frames.select(rows)
+        st_r = type(st)(*(getattr(st, f)[rows] for f in ("x", "a", "b", "m", "n", "norm_m")))
+        mp = self.surface.evaluate(u_m, hits.piece[rows], hits.theta[rows])
+        d = gap_derivatives(frames, st_r, mp, hits.g[rows], self.finite, second=tangent)
+        lam_r = lam[rows]
+        dofs_s = self.slave_space.element_dofs[frames.slot]                       # (k, 24)
+        dofs_m = self.master_space.element_dofs[mp.slot]
+        f = (d.w * lam_r)[:, None] * d.dg                                         # (k, 48)
+        np.add.at(r_s, dofs_s, f[:, :24])
+        np.add.at(r_m, dofs_m, f[:, 24:])
+        if not tangent:
+            return r_s, r_m, None
+        K = (d.w * self.eps)[:, None, None] * d.dg[:, :, None] * d.dg[:, None, :] \
+            + (d.w * lam_r)[:, None, None] * d.d2g \
+            + lam_r[:, None, None] * d.dg[:, :, None] * d.dw[:, None, :]
+        # a held point that is not active has no force but keeps its penalty stiffness
+        K[lam_r == 0.0] = ((d.w * self.eps)[:, None, None] * d.dg[:, :, None] * d.dg[:, None, :])[lam_r == 0.0]
+        dofs = np.concatenate([dofs_s, dofs_m + u_s.size], axis=1)                # (k, 48)
+        rr = np.repeat(dofs, 48, axis=1).ravel()
+        cc = np.tile(dofs, (1, 48)).ravel()
+        return r_s, r_m, (rr, cc, K.ravel())
+
+    def _multiplier(self, hits: RayHits) -> tuple[np.ndarray, np.ndarray]:
+        trial = np.where(hits.found, self.state.p_N + self.eps * np.where(hits.found, hits.g, 0.0), np.inf)
+        active = hits.found & (trial <= 0.0)
+        return np.where(active, trial, 0.0), active
+
+    def _record(self, hits: RayHits, active: np.ndarray) -> None:
+        st = self.state
+        if st.active is not None and st.switches is not None:
+            st.switches += active != st.active
+        st.active, st.hits = active, hits
+
+    # -- outputs ---------------------------------------------------------------------------
+    def points(self, u_s: np.ndarray, u_m: np.ndarray) -> ContactPoints:
+        """The slave points at ``(u_s, u_m)`` with their gaps, pressures and weights."""
+        U1, st, hits = self.search(u_s, u_m)
+        lam, active = self._multiplier(hits)
+        w = self.frames.w * (st.norm_m / np.linalg.norm(np.cross(self.frames.A, self.frames.B), axis=1)
+                             if self.finite else 1.0)
+        return ContactPoints(st.x, st.n, np.where(hits.found, hits.g, np.nan), lam, active, w,
+                             self.state.p_N.copy())
+
+
+def slave_gradients(space, frames: SlaveFrames) -> np.ndarray:
+    """Shape gradients (n, 8, 3) at the slave points (from their reference positions)."""
+    centre = space.centres()[frames.slot]
+    xi = (frames.X - centre) / (0.5 * space.h)
+    return shape_derivatives(xi, space.h)[1]
