@@ -228,3 +228,18 @@ def test_command_line_writes_converged_reference(tmp_path, capsys):
     assert abs(ref.energies[1] - ref.energies[0]) <= 1e-2 * ref.energies[1]
     assert "level 1" in capsys.readouterr().err
     assert planar.main(["--out", str(out), "--max-level", "0"]) == 2
+
+
+def test_relative_energy_error_of_a_coarse_level_is_its_energy_gap(level1):
+    """Nested meshes: ||u_1 − u_0||²_E = 2 (U_1 − U_0), exactly.
+
+    Π(v) − Π(u_1) = ½ ||v − u_1||²_E for v = u_0 in the finer admissible space, and at a
+    discrete solution Π(u_h) = R_h·d − U_h, where the top reaction R_h equals the lateral load
+    resultant at every level (global equilibrium). Integrated on the finer mesh's Gauss points,
+    which are exact for both fields.
+    """
+    coarse = planar.solve(0)
+    x, w, body = _gauss_points(level1)
+    error = relative_energy_error(level1, x, w, coarse.strain(x[:, 1], x[:, 2], body), body)
+    gap = np.sqrt((level1.strain_energy - coarse.strain_energy) / level1.strain_energy)
+    assert error == pytest.approx(gap, rel=1e-8)
