@@ -209,6 +209,8 @@ def test_strain_and_stress_plane_strain_and_body_choice(level1):
     np.testing.assert_allclose(sigma[:, 0, 0], NU * (sigma[:, 1, 1] + sigma[:, 2, 2]), rtol=1e-12)
     with pytest.raises(ValueError, match="body"):
         level1.strain(y, z, "middle")
+    with pytest.raises(ValueError, match="outside body lower"):
+        level1.strain(y, z, "lower")  # z = 0.015 is in the upper block
 
 
 def test_save_load_round_trip(level1, tmp_path):

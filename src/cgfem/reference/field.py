@@ -19,6 +19,16 @@ from cgfem.reference.mesh import RectMesh
 
 BODIES = ("lower", "upper")
 INTERFACE_Z = 0.01  # m
+OUTSIDE_TOL = 1e-8  # m
+
+
+def _check_inside(mesh: RectMesh, y: np.ndarray, z: np.ndarray, name: str) -> None:
+    """ValueError if a point (y, z), each (n,), is farther than OUTSIDE_TOL outside ``mesh``."""
+    out = np.maximum.reduce([mesh.y_breaks[0] - y, y - mesh.y_breaks[-1],
+                             mesh.z_breaks[0] - z, z - mesh.z_breaks[-1]])
+    if out.max(initial=0.0) > OUTSIDE_TOL:
+        i = int(np.argmax(out))
+        raise ValueError(f"x: point (y, z) = ({y[i]:.6g}, {z[i]:.6g}) lies outside body {name}")
 
 
 @dataclass(frozen=True)
@@ -100,8 +110,9 @@ class PlanarReference:
 
         ``body``: None (the body containing the point; a point on the interface z = 0.01
         belongs to the lower body), or ``"lower"``/``"upper"``/0/1, scalar or (n,), to force
-        it. Points are clipped to the body's rectangle (quadrature points of a cut cell may
-        sit a rounding error outside).
+        it. Points up to ``OUTSIDE_TOL`` outside the body's rectangle are clipped onto it
+        (quadrature points of a cut cell may sit a rounding error outside); farther ones are
+        a ValueError.
         """
         y = np.atleast_1d(np.asarray(y, dtype=float))
         z = np.atleast_1d(np.asarray(z, dtype=float))
@@ -113,6 +124,7 @@ class PlanarReference:
                 continue
             mesh = self.mesh(name)
             u = self.u_lower if index == 0 else self.u_upper
+            _check_inside(mesh, y[sel], z[sel], name)
             element, xi, eta = mesh.locate(y[sel], z[sel])
             conn = mesh.connectivity()[element]  # (n, 9)
             _, dxi, deta = q9_basis(xi, eta)

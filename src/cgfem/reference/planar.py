@@ -24,6 +24,7 @@ import argparse
 import resource
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Callable
 
@@ -74,13 +75,15 @@ def meshes(level: int, n_half0: int = N_HALF_0, beta: float = BETA) -> tuple[Rec
     )
 
 
-def _node_dofs(lower: RectMesh, upper: RectMesh, tied: np.ndarray):
-    """Global DOFs (n_nodes, 2) of each body with u_z shared at tied interface nodes."""
+def _node_dofs(
+    lower: RectMesh, upper: RectMesh, tied: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Global DOFs (n_nodes, 2) of each body, u_z shared at ``tied`` (m,) interface nodes."""
     d1 = np.arange(2 * lower.n_nodes).reshape(-1, 2)
     d2 = 2 * lower.n_nodes + np.arange(2 * upper.n_nodes).reshape(-1, 2)
     d2[upper.side_nodes("zmin")[tied], 1] = d1[lower.side_nodes("zmax")[tied], 1]
     _, inverse = np.unique(np.concatenate([d1.ravel(), d2.ravel()]), return_inverse=True)
-    n = inverse.max() + 1
+    n = int(inverse.max()) + 1
     return inverse[: d1.size].reshape(d1.shape), inverse[d1.size :].reshape(d2.shape), n
 
 
@@ -124,11 +127,8 @@ def _interface(lower: RectMesh, u1: np.ndarray, k1, loads, load_nodes):
     edges = lower.side_edges("zmax")
     m = edge_mass(lower.node_coords()[edges])
     index = np.searchsorted(top, edges)  # edge nodes as interface positions (top is sorted)
-    rows = np.broadcast_to(index[:, :, None], m.shape).ravel()
-    cols = np.broadcast_to(index[:, None, :], m.shape).ravel()
-    M = np.zeros((len(top), len(top)))
-    np.add.at(M, (rows, cols), m.ravel())
-    traction = np.linalg.solve(M, force)  # m ≤ a few hundred: dense is fine
+    M = assemble_matrix(m, index, len(top)).toarray()  # a few hundred nodes: dense is fine
+    traction = np.linalg.solve(M, force)
     return force, traction
 
 
@@ -204,6 +204,11 @@ def converged(
     with the history of every level solved; ``converged`` is False if ``max_level`` was
     reached first (logged).
     """
+    if start_level < 0 or max_level <= start_level or tol_digits < 1:
+        raise ValueError(
+            f"levels: need 0 <= start_level < max_level and tol_digits >= 1 "
+            f"(got {start_level}, {max_level}, {tol_digits})"
+        )
     history: list[PlanarReference] = []
     for level in range(start_level, max_level + 1):
         ref = solve(level)
@@ -220,7 +225,7 @@ def converged(
         name: np.concatenate([getattr(h, name) for h in history])
         for name in ("levels", "energies", "dofs", "seconds", "peak_rss_mb")
     }
-    return PlanarReference(**{**ref.__dict__, **stacked, "converged": bool(done)})
+    return replace(ref, **stacked, converged=bool(done))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -232,9 +237,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--max-level", type=int, default=5)
     parser.add_argument("--start-level", type=int, default=0)
     args = parser.parse_args(argv)
-    if args.start_level < 0 or args.max_level < args.start_level + 1:
-        print(f"--max-level: must exceed --start-level >= 0 (got {args.max_level}, "
-              f"{args.start_level})", file=sys.stderr)
+    if args.start_level < 0 or args.max_level <= args.start_level or args.tol_digits < 1:
+        print(f"--max-level: must exceed --start-level >= 0, and --tol-digits be >= 1 (got "
+              f"{args.max_level}, {args.start_level}, {args.tol_digits})", file=sys.stderr)
         return 2
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
