@@ -34,6 +34,7 @@ from cgfem.embedding.reduce import reduced_surface
 from cgfem.geometry.bvh import SurfaceIndex
 from cgfem.geometry.inside import points_inside
 from cgfem.geometry.solid import Solid
+from cgfem.quadrature_rules import tensor_gauss
 
 OUTSIDE, INSIDE, CUT = 0, 1, 2
 SURFACE_DEFINITIONS = ("nurbs", "facets")
@@ -116,12 +117,12 @@ def grid_for(solid: Solid, h0: float, level: int, offset=(0.0, 0.0, 0.0)) -> Car
 
 
 def _interior_rule(grid: CartesianGrid, elements: np.ndarray) -> VolumeRule:
-    g = np.array([-1.0, 1.0]) / np.sqrt(3.0)
-    local = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+    """2x2x2 Gauss rule (exact for degree <= 3 per variable) on each of ``elements``."""
+    local, wq = tensor_gauss(2, 3)
     centre = grid.element_center(grid.element_ijk(elements))
     x = centre[:, None, :] + 0.5 * grid.h * local[None, :, :]
-    w = np.full(x.shape[:2], (0.5 * grid.h) ** 3)
-    return VolumeRule(x.reshape(-1, 3), w.reshape(-1), np.repeat(elements, 8))
+    w = np.broadcast_to(wq * (0.5 * grid.h) ** 3, x.shape[:2])
+    return VolumeRule(x.reshape(-1, 3), w.reshape(-1), np.repeat(elements, local.shape[0]))
 
 
 def embed(solid: Solid, grid: CartesianGrid, surface: str = "nurbs", tol: float = DEFAULT_TOL,

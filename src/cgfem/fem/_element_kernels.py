@@ -13,15 +13,20 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-_SIGNS = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
-                   [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=np.float64)
+#: local coordinates (8, 3) of the H8 nodes, in the grid's node order
+#: (:meth:`cgfem.embedding.grid.CartesianGrid.element_nodes`)
+NODE_XI = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
+                    [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=np.float64)
 
 
 @njit(cache=True)
 def basis(xi, h, N, dN):
-    """H8 shape functions ``N`` (8,) and physical gradients ``dN`` (8, 3) at ``xi`` (3,)."""
+    """H8 shape functions ``N`` (8,) and physical gradients ``dN`` (8, 3) at ``xi`` (3,):
+    ``N_a = (1 + s_a0 xi_0)(1 + s_a1 xi_1)(1 + s_a2 xi_2) / 8`` with ``s_a = NODE_XI[a]``,
+    ``dN_a/dX = (2 / h) dN_a/dxi`` on a cube of size ``h``. The one H8 evaluation of the
+    package: every other H8 quantity is built on it."""
     for a in range(8):
-        s0, s1, s2 = _SIGNS[a, 0], _SIGNS[a, 1], _SIGNS[a, 2]
+        s0, s1, s2 = NODE_XI[a, 0], NODE_XI[a, 1], NODE_XI[a, 2]
         f0 = 1.0 + s0 * xi[0]
         f1 = 1.0 + s1 * xi[1]
         f2 = 1.0 + s2 * xi[2]
@@ -30,6 +35,69 @@ def basis(xi, h, N, dN):
         dN[a, 0] = scale * s0 * f1 * f2
         dN[a, 1] = scale * s1 * f0 * f2
         dN[a, 2] = scale * s2 * f0 * f1
+
+
+@njit(cache=True, parallel=True)
+def basis_at(xi, h):
+    """Shape functions ``N`` (n, 8) and physical gradients ``dN`` (n, 8, 3) at ``xi`` (n, 3)."""
+    n = xi.shape[0]
+    N = np.empty((n, 8))
+    dN = np.empty((n, 8, 3))
+    for p in prange(n):
+        basis(xi[p], h, N[p], dN[p])
+    return N, dN
+
+
+@njit(cache=True)
+def locate(x, origin, h, shape, elements, tol, slots, xi):
+    """Active element ``slots`` (n,) and local coordinates ``xi`` (n, 3) of points ``x`` (n, 3)
+    in a grid (``origin`` (3,), cube size ``h``, ``shape`` (3,) elements per axis) whose
+    active elements are the ascending grid ids ``elements``. A point within ``tol`` (in units
+    of ``h``) of a grid plane is also looked for in the element across the plane: the
+    candidates are tried in order (the element holding ``floor`` of the point's grid
+    coordinates first, then the neighbours across nearby planes, lower before upper, axis 0
+    slowest) and the first active one is taken. Points in no active element get slot -1
+    and NaN local coordinates."""
+    n_el = elements.size
+    cand = np.empty((3, 3), np.int64)
+    n_cand = np.empty(3, np.int64)
+    t = np.empty(3)
+    for p in range(x.shape[0]):
+        slots[p] = -1
+        xi[p, 0] = xi[p, 1] = xi[p, 2] = np.nan
+        ok = True
+        for d in range(3):
+            t[d] = (x[p, d] - origin[d]) / h
+            if not np.isfinite(t[d]):
+                ok = False
+                continue
+            b = np.int64(np.floor(t[d]))
+            cand[d, 0] = b
+            n_cand[d] = 1
+            if t[d] - b <= tol:
+                cand[d, n_cand[d]] = b - 1
+                n_cand[d] += 1
+            if b + 1 - t[d] <= tol:
+                cand[d, n_cand[d]] = b + 1
+                n_cand[d] += 1
+        if not ok:
+            continue
+        for q0 in range(n_cand[0]):
+            i = cand[0, q0]
+            for q1 in range(n_cand[1]):
+                j = cand[1, q1]
+                for q2 in range(n_cand[2]):
+                    k = cand[2, q2]
+                    if slots[p] >= 0 or i < 0 or j < 0 or k < 0 \
+                            or i >= shape[0] or j >= shape[1] or k >= shape[2]:
+                        continue
+                    e = (i * shape[1] + j) * shape[2] + k
+                    s = np.searchsorted(elements, e)
+                    if s < n_el and elements[s] == e:
+                        slots[p] = s
+                        xi[p, 0] = (x[p, 0] - (origin[0] + (i + 0.5) * h)) / (0.5 * h)
+                        xi[p, 1] = (x[p, 1] - (origin[1] + (j + 0.5) * h)) / (0.5 * h)
+                        xi[p, 2] = (x[p, 2] - (origin[2] + (k + 0.5) * h)) / (0.5 * h)
 
 
 @njit(cache=True, parallel=True)

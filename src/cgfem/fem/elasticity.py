@@ -19,12 +19,11 @@ from cgfem.fem import _element_kernels as kern
 from cgfem.fem._material_kernels import LINEAR_ELASTIC, stress_batch, tangent_batch
 from cgfem.fem.assembly import Pattern
 from cgfem.fem.space import ElementPoints, Space
+from cgfem.quadrature_rules import tensor_gauss
 
 #: elements whose tangent tensors are held at once in finite strain
 CHUNK_ELEMENTS = 4096
 
-_GAUSS2 = np.stack(np.meshgrid(*[np.array([-1.0, 1.0]) / np.sqrt(3.0)] * 3, indexing="ij"),
-                   axis=-1).reshape(-1, 3)
 
 
 @dataclass
@@ -106,9 +105,10 @@ class Elasticity:
 def reference_matrix(A: np.ndarray, h: float) -> np.ndarray:
     """Stiffness (24, 24) of a whole cube of size ``h`` with the constant tangent ``A``
     (3, 3, 3, 3), by 2x2x2 Gauss (exact for H8)."""
-    w = np.full(8, (0.5 * h) ** 3)
+    xi, w = tensor_gauss(2, 3)
+    w = w * (0.5 * h) ** 3
     offsets = np.array([0, 8], np.int64)
     scatter = np.arange(576, dtype=np.int64).reshape(1, 576)
     data = np.zeros(576)
-    kern.integrate_tangent(A[None], -1, _GAUSS2, w, offsets, h, np.array([0], np.int64), scatter, data)
+    kern.integrate_tangent(A[None], -1, xi, w, offsets, h, np.array([0], np.int64), scatter, data)
     return data.reshape(24, 24)

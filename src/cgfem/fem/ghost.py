@@ -24,7 +24,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from cgfem.fem.space import NODE_XI, Space
+from cgfem.fem.space import Space, shape_functions
+from cgfem.quadrature_rules import tensor_gauss
+
 
 def face_pairs(space: Space) -> tuple[np.ndarray, np.ndarray]:
     """Pairs of active elements sharing a face with at least one of them cut.
@@ -53,21 +55,16 @@ def face_pairs(space: Space) -> tuple[np.ndarray, np.ndarray]:
 def face_matrix(axis: int, h: float) -> np.ndarray:
     """``int_F [dN/dn] [dN/dn] dF`` (16, 16) for the face between a lower and an upper
     element along ``axis`` (nodes of the lower element first), by 2x2 Gauss (exact)."""
-    g = np.array([-1.0, 1.0]) / np.sqrt(3.0)
+    g, gw = tensor_gauss(2, 2)                        # (4, 2) points on the face, (4,) weights
     others = [a for a in range(3) if a != axis]
-    m = np.zeros((16, 16))
-    for s in g:
-        for t in g:
-            jump = np.empty(16)
-            for side, xi_n in ((0, 1.0), (1, -1.0)):
-                xi = np.zeros(3)
-                xi[axis] = xi_n
-                xi[others[0]], xi[others[1]] = s, t
-                f = 1.0 + NODE_XI * xi                     # (8, 3)
-                d = NODE_XI[:, axis] * np.prod(np.delete(f, axis, axis=1), axis=1) / 8.0 * (2.0 / h)
-                jump[8 * side:8 * side + 8] = d if side == 1 else -d
-            m += np.outer(jump, jump) * (0.5 * h) ** 2
-    return m
+    xi = np.zeros((g.shape[0], 3))
+    xi[:, others] = g
+    xi_lower, xi_upper = xi.copy(), xi.copy()
+    xi_lower[:, axis], xi_upper[:, axis] = 1.0, -1.0   # the face is the lower element's + face
+    d_lower = shape_functions(xi_lower, h)[1][:, :, axis]   # (4, 8) normal derivatives
+    d_upper = shape_functions(xi_upper, h)[1][:, :, axis]
+    jump = np.concatenate([-d_lower, d_upper], axis=1)  # (4, 16)
+    return np.einsum("q,qa,qb->ab", gw * (0.5 * h) ** 2, jump, jump)
 
 
 def ghost_penalty(space: Space, gamma: float, modulus: float) -> tuple[sp.csr_matrix, np.ndarray]:

@@ -17,10 +17,22 @@ import numpy as np
 from cgfem.embedding.export import active_hex_mesh
 from cgfem.embedding.grid import CartesianGrid
 from cgfem.embedding.quadrature import CUT, Embedding
+from cgfem.fem import _element_kernels as kern
+from cgfem.fem._element_kernels import NODE_XI
 
-#: local coordinates of the 8 H8 nodes, in the grid's node order
-NODE_XI = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
-                    [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=float)
+__all__ = ["NODE_XI", "ElementPoints", "Space", "shape_functions"]
+
+#: distance (in units of h) from a grid plane within which :meth:`Space.locate` also looks
+#: for a point in the element across the plane
+LOCATE_TOL = 1e-10
+
+
+def shape_functions(xi: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """H8 shape functions ``N`` (n, 8) and their physical gradients ``dN`` (n, 8, 3),
+    ``dN[p, a, J] = dN_a/dX_J``, at local coordinates ``xi`` (n, 3) of a cube of size ``h``
+    (node order :data:`NODE_XI`; evaluated by :func:`cgfem.fem._element_kernels.basis`)."""
+    xi = np.ascontiguousarray(np.asarray(xi, float).reshape(-1, 3))
+    return kern.basis_at(xi, float(h))
 
 
 @dataclass(frozen=True)
@@ -142,13 +154,50 @@ class Space:
         rule = embedding.volume
         return self.group(rule.x, rule.w, rule.element)[0]
 
-    def shape_values(self, xi: np.ndarray) -> np.ndarray:
-        """H8 shape functions (n, 8) at local coordinates ``xi`` (n, 3)."""
-        xi = np.asarray(xi, float)
-        return np.prod(1.0 + xi[:, None, :] * NODE_XI[None, :, :], axis=2) / 8.0
-
     def interpolate(self, nodal: np.ndarray, slots: np.ndarray, xi: np.ndarray) -> np.ndarray:
         """Values at points of a nodal field ``nodal`` (n_nodes, ...)."""
-        n = self.shape_values(xi)
+        n = shape_functions(xi, self.h)[0]
         values = nodal[self.connectivity[slots]]
         return np.einsum("pa,pa...->p...", n, values)
+
+    # -- point evaluation at arbitrary points ------------------------------------------------
+    def locate(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The active element holding each point ``x`` (n, 3), in any order: ``slots`` (n,)
+        compact element numbers and local coordinates ``xi`` (n, 3), with
+        ``x = centre + (h / 2) xi``. A point on a face (within :data:`LOCATE_TOL` h of a grid
+        plane) is given to the element whose lower face holds it if that one is active, else
+        to the active one across the face: deterministic, and active wherever possible.
+        Points in no active element (outside the grid, in outside elements) get slot -1 and
+        NaN ``xi``."""
+        x = np.ascontiguousarray(np.asarray(x, float).reshape(-1, 3))
+        slots = np.empty(x.shape[0], np.int64)
+        xi = np.empty((x.shape[0], 3))
+        grid = self.grid
+        kern.locate(x, np.asarray(grid.origin, float), float(grid.h), np.asarray(grid.shape, np.int64),
+                    self.elements, LOCATE_TOL, slots, xi)
+        return slots, xi
+
+    def evaluate(self, u: np.ndarray, slots: np.ndarray, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The displacement ``u`` (n_dofs,) at points given by active element ``slots`` (n,)
+        and local coordinates ``xi`` (n, 3), in any order (e.g. from :meth:`locate`):
+        ``values`` (n, 3) and ``gradients`` (n, 3, 3), ``gradients[p, i, J] = du_i/dX_J``.
+        Points with slot -1 get NaN."""
+        slots = np.asarray(slots, np.int64).reshape(-1)
+        xi = np.asarray(xi, float).reshape(-1, 3)
+        u = np.ascontiguousarray(np.asarray(u, float).reshape(-1))
+        if u.size != self.n_dofs:
+            raise ValueError(f"u has {u.size} entries, the space {self.n_dofs} dofs")
+        if slots.size != xi.shape[0]:
+            raise ValueError(f"{slots.size} slots for {xi.shape[0]} points")
+        if np.any(slots >= self.n_elements):
+            raise ValueError("slots beyond the active elements")
+        # the element kernels take points grouped by element: sort, evaluate, scatter back
+        valid = np.flatnonzero(slots >= 0)
+        order = valid[np.argsort(slots[valid], kind="stable")]
+        offsets = self.offsets(slots[order])
+        xs = np.ascontiguousarray(xi[order])
+        values = np.full((slots.size, 3), np.nan)
+        gradients = np.full((slots.size, 3, 3), np.nan)
+        values[order] = kern.point_values(self.connectivity, u.reshape(-1, 3), xs, offsets, self.h)
+        gradients[order] = kern.point_gradients(self.connectivity, u, xs, offsets, self.h)
+        return values, gradients
