@@ -279,7 +279,8 @@ def _contact(i: int, raw: Mapping[str, Any], names: tuple[str, ...]) -> ContactP
     require_body(names, raw["slave"], f"{prefix}.slave")
     require_body(names, raw["master"], f"{prefix}.master")
     kappa = _number(raw.get("kappa", ContactPair.kappa), f"{prefix}.kappa")
-    return _within(prefix, ContactPair, raw["slave"], raw["master"], kappa)
+    patches = {key: tuple(raw[key]) for key in ("slave_patches", "master_patches") if key in raw}
+    return _within(prefix, ContactPair, raw["slave"], raw["master"], kappa, **patches)
 
 
 def _solver(raw: Mapping[str, Any]) -> SolverOptions:
@@ -299,16 +300,20 @@ def check_patch_names(case: Case, patches_by_body: Mapping[str, Sequence[str]]) 
     body's patches; bodies not in the mapping are skipped. Raises :class:`InputError` at
     ``boundary[i].patches[j]``. The loader checks the builder bodies; the CLI calls this
     again with the patch names of the ``nurbs`` bodies once their files are read."""
-    for i, bc in enumerate(case.boundary):
-        known = patches_by_body.get(bc.body)
+    entries = [(f"boundary[{i}].patches", bc.body, bc.patches) for i, bc in enumerate(case.boundary)]
+    for i, pair in enumerate(case.contact):
+        entries += [(f"contact[{i}].{side}_patches", body, patches)
+                    for side, body, patches in (("slave", pair.slave, pair.slave_patches),
+                                                ("master", pair.master, pair.master_patches))
+                    if patches is not None]
+    for field, body, patches in entries:
+        known = patches_by_body.get(body)
         if known is None:
             continue
-        for j, patch in enumerate(bc.patches):
+        for j, patch in enumerate(patches):
             if patch not in known:
-                raise InputError(
-                    f"boundary[{i}].patches[{j}]",
-                    f"unknown patch {patch!r} of body {bc.body!r} (known: {', '.join(known)})",
-                )
+                raise InputError(f"{field}[{j}]",
+                                 f"unknown patch {patch!r} of body {body!r} (known: {', '.join(known)})")
 
 
 def parse_case(data: object, base_dir: Path, source: Path | None = None) -> Case:

@@ -12,7 +12,7 @@ import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Literal, NamedTuple
 
 from cgfem.case.expressions import Expression, VectorExpression
 from cgfem.errors import InputError
@@ -31,6 +31,7 @@ __all__ = [
     "ContactPair",
     "DisplacementBC",
     "GridSpec",
+    "Lame",
     "Material",
     "SolverOptions",
     "TractionBC",
@@ -70,6 +71,14 @@ def _count(field: str, value: int) -> int:
     return value
 
 
+class Lame(NamedTuple):
+    """Lamé parameters (Pa), always in this order: ``lam, mu = material.lame()``; the numba
+    kernels take ``(mu, lam)``, so pass them by name (``l.mu, l.lam``) there."""
+
+    lam: float
+    mu: float
+
+
 @dataclass(frozen=True)
 class Material:
     """Isotropic hyperelastic material: Young's modulus ``E`` (Pa), Poisson's ratio ``nu``."""
@@ -88,12 +97,12 @@ class Material:
         object.__setattr__(self, "E", E)
         object.__setattr__(self, "nu", nu)
 
-    def lame(self) -> tuple[float, float]:
-        """Lamé parameters ``(lambda, mu)`` in Pa:
-        ``lambda = E nu / ((1 + nu)(1 - 2 nu))``, ``mu = E / (2 (1 + nu))``."""
+    def lame(self) -> Lame:
+        """Lamé parameters ``Lame(lam, mu)`` in Pa:
+        ``lam = E nu / ((1 + nu)(1 - 2 nu))``, ``mu = E / (2 (1 + nu))``."""
         lam = self.E * self.nu / ((1.0 + self.nu) * (1.0 - 2.0 * self.nu))
         mu = self.E / (2.0 * (1.0 + self.nu))
-        return lam, mu
+        return Lame(lam, mu)
 
 
 @dataclass(frozen=True)
@@ -203,10 +212,15 @@ class ContactPair:
     slave: str
     master: str
     kappa: float = 10.0
+    slave_patches: tuple[str, ...] | None = None     # None: every patch of the body
+    master_patches: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
         if self.slave == self.master:
             raise InputError("master", f"must differ from slave ({self.slave!r})")
+        for name in ("slave_patches", "master_patches"):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, _patches(getattr(self, name)))
         kappa = _finite("kappa", self.kappa)
         if not kappa > 0.0:
             raise InputError("kappa", f"must be > 0, got {self.kappa!r}")
@@ -216,12 +230,14 @@ class ContactPair:
 @dataclass(frozen=True)
 class SolverOptions:
     """Newton tolerance (relative residual), iteration limits, linear solver choice, the
-    outer-loop tolerance on the recovered stress, the number of step cut-backs, and the
-    weak-Dirichlet (``kappa_dirichlet``) and ghost-penalty parameters."""
+    outer-loop tolerance on the recovered stress and its cap ``outer_passes`` (a step whose
+    loop reaches the cap above ``outer_tol`` is reported ``outer_converged: false``), the
+    number of step cut-backs, and the weak-Dirichlet (``kappa_dirichlet``) and
+    ghost-penalty parameters."""
 
     newton_tol: float = 1e-9
     max_newton: int = 30
-    outer_passes: int = 4
+    outer_passes: int = 50
     linear: Literal["auto", "superlu", "pyamg", "pardiso"] = "auto"
     outer_tol: float = 1e-6
     max_cutbacks: int = 5
@@ -287,6 +303,10 @@ class Case:
         for i, pair in enumerate(self.contact):
             require_body(names, pair.slave, f"contact[{i}].slave")
             require_body(names, pair.master, f"contact[{i}].master")
+            for j, other in enumerate(self.contact[:i]):
+                if {other.slave, other.master} == {pair.slave, pair.master}:
+                    raise InputError(f"contact[{i}]", f"bodies {pair.slave!r} and {pair.master!r} "
+                                     f"are already paired by contact[{j}]")
 
     @property
     def body_names(self) -> tuple[str, ...]:

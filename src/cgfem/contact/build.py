@@ -1,0 +1,52 @@
+"""Contact pairs of a case, built on the discretized bodies.
+
+Slave points are the slave body's boundary-rule points (the reduced rule of the weak form:
+exact NURBS points for ``nurbs_fe``, points on the facet triangles for ``facets``) on the
+pair's ``slave_patches``; the master surface is the master body's ``master_patches`` in the
+same surface definition. ``max_gap`` (the farthest a ray looks) is
+:data:`~cgfem.contact.pair.MAX_GAP_H` times the larger element size of the two bodies.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cgfem.case.model import ContactPair as ContactSpec
+from cgfem.contact.pair import MAX_GAP_H, ContactPair, slave_gradients
+from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface
+from cgfem.geometry.solid import Solid
+
+DEFINITIONS = ("facets", "nurbs_fe")
+
+
+def patch_ids(solid_names: tuple[str, ...], wanted: tuple[str, ...] | None) -> np.ndarray:
+    """Indices of the patches (of a body whose patches are named ``solid_names``) named in
+    ``wanted`` (None: all)."""
+    return np.array([i for i, name in enumerate(solid_names) if wanted is None or name in wanted], np.int64)
+
+
+def build_pair(name: str, spec: ContactSpec, index: dict[str, int], models: list, solids: dict[str, Solid],
+               definition: str, finite: bool) -> ContactPair:
+    """The pair ``spec`` between ``models[index[spec.slave]]`` and the master's model."""
+    if definition not in DEFINITIONS:
+        raise NotImplementedError(f"contact with the {definition!r} surface definition")
+    s_model, m_model = models[index[spec.slave]], models[index[spec.master]]
+    s_solid, m_solid = solids[spec.slave], solids[spec.master]
+    s_emb, m_emb = s_model.embedding, m_model.embedding
+    s_ids = patch_ids(tuple(p.name for p in s_solid.patches), spec.slave_patches)
+    m_ids = patch_ids(tuple(p.name for p in m_solid.patches), spec.master_patches)
+    rule = s_emb.boundary.select(np.isin(s_emb.boundary.patch, s_ids) & (s_emb.boundary.w > 0.0))
+    if definition == "nurbs_fe":
+        frames = NurbsFeSurface(s_solid, s_model.space, rule, s_ids).slave_frames(rule)
+        master = NurbsFeSurface(m_solid, m_model.space, m_emb.surface, m_ids)
+    else:
+        s_fac, m_fac = s_emb.facets, m_emb.facets
+        slave_srf = FacetSurface(s_model.space, s_fac.triangles, s_fac.element, np.isin(s_fac.patch, s_ids))
+        frames = slave_srf.slave_frames(rule.piece, rule.uv, rule.w)
+        master = FacetSurface(m_model.space, m_fac.triangles, m_fac.element, np.isin(m_fac.patch, m_ids))
+    mu, lam = s_model.elasticity.mu, s_model.elasticity.lam
+    E = mu * (3.0 * lam + 2.0 * mu) / (lam + mu)        # Young's modulus of the slave
+    h = s_model.space.h
+    max_gap = MAX_GAP_H * max(h, m_model.space.h)
+    return ContactPair(name, index[spec.slave], index[spec.master], s_model.space, m_model.space, frames,
+                       slave_gradients(s_model.space, frames), master, spec.kappa * E / h, finite, max_gap)
