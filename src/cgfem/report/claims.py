@@ -1,0 +1,131 @@
+"""The paper's four claims (DESIGN.md "claims to reproduce"), decided from the result files.
+
+1. The energy-norm error converges at the optimal rate for all three definitions (planar).
+2. ``facets`` on the coarsest chain2 mesh fails or is poor, while the NURBS definitions
+   converge there ("poor": its final pulled reaction is further from the reference, the
+   NURBS+FE reaction on the finest converged mesh, than both NURBS definitions' on that mesh).
+3. ``facets`` gives a lower pulled reaction on mesh 2 than both NURBS definitions.
+4. ``facets`` gives a lower peak von Mises stress than ``nurbs_fe`` in the middle link of chain3.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cgfem.atomic import write_text_atomic
+from cgfem.report.convergence import OPTIMAL_RATE, rates
+from cgfem.report.energy import read_error_tables
+from cgfem.report.runs import Run, load_runs
+
+NURBS = ("nurbs_fe", "nurbs_fit")
+SURFACES = ("facets",) + NURBS
+
+
+@dataclass(frozen=True)
+class Claim:
+    number: int
+    text: str
+    reproduced: bool
+    numbers: str
+
+
+def _find(runs: list[Run], surface: str, level: int) -> Run | None:
+    return next((r for r in runs if (r.surface, r.level) == (surface, level)), None)
+
+
+def claim_optimal_rate(error_tables, tolerance: float) -> Claim:
+    """Claim 1: every definition's fitted rate (in h, the lower over the bodies) is at least
+    ``OPTIMAL_RATE - tolerance``."""
+    fitted = rates(read_error_tables(error_tables))
+    worst = {s: min((v for (surface, _), v in fitted.items() if surface == s), default=np.nan)
+             for s in SURFACES}
+    ok = all(np.isfinite(v) and v >= OPTIMAL_RATE - tolerance for v in worst.values())
+    numbers = "; ".join(f"{s}: " + ", ".join(f"{b} {v:.3f}" for (surface, b), v in fitted.items()
+                                             if surface == s) if np.isfinite(worst[s])
+                        else f"{s}: no rate (fewer than two levels)" for s in SURFACES)
+    return Claim(1, f"optimal energy-norm rate (O(h), at least {OPTIMAL_RATE - tolerance:g}) "
+                 "for all three definitions, planar", bool(ok), f"fitted rates in h: {numbers}")
+
+
+def _final_reaction(run: Run, key: str, component: int) -> float:
+    return float(run.reactions(key)[-1, component])
+
+
+def claim_coarse_facets(runs: list[Run], pulled: str, component: int) -> Claim:
+    """Claim 2 on the runs of one chain2 example (all levels and definitions)."""
+    text = "facets fails or is poor on the coarsest chain2 mesh while the NURBS definitions converge"
+    coarse = min(r.level for r in runs)
+    facets = _find(runs, "facets", coarse)
+    nurbs = {s: _find(runs, s, coarse) for s in NURBS}
+    fe_done = [r for r in runs if r.surface == "nurbs_fe" and not r.failed]
+    if facets is None or any(r is None for r in nurbs.values()) or not fe_done:
+        return Claim(2, text, False, f"missing runs at level {coarse} or no converged nurbs_fe run")
+    reference = max(fe_done, key=lambda r: r.level)
+    target = _final_reaction(reference, pulled, component)
+    status = ", ".join(f"{s}: {r.status}" for s, r in [("facets", facets), *nurbs.items()])
+    nurbs_ok = all(not r.failed for r in nurbs.values())
+    if facets.failed:
+        return Claim(2, text, nurbs_ok, f"level {coarse}: {status}")
+    error = {s: abs(_final_reaction(r, pulled, component) - target) / abs(target)
+             for s, r in [("facets", facets), *nurbs.items()] if not r.failed}
+    poor = all(error["facets"] > error[s] for s in NURBS if s in error)
+    return Claim(2, text, bool(nurbs_ok and poor),
+                 f"level {coarse}: {status}; final reaction off the nurbs_fe L{reference.level} value "
+                 f"({target:.6g} N) by " + ", ".join(f"{s} {e:.2%}" for s, e in error.items()))
+
+
+def claim_lower_reaction(runs: list[Run], level: int, pulled: str, component: int) -> Claim:
+    """Claim 3: |pulled reaction| of facets below both NURBS definitions at ``level``, compared
+    at the largest load factor all three reached."""
+    text = f"facets gives a lower reaction than the NURBS definitions on chain2 mesh {level}"
+    chosen = {s: _find(runs, s, level) for s in SURFACES}
+    if any(r is None or r.n_steps == 0 for r in chosen.values()):
+        return Claim(3, text, False, f"missing or empty runs at level {level}")
+    load = min(r.load_factors()[-1] for r in chosen.values())
+    force = {}
+    for s, r in chosen.items():
+        step = int(np.flatnonzero(np.isclose(r.load_factors(), load))[0])
+        force[s] = abs(float(r.reactions(pulled)[step, component]))
+    lower = all(force["facets"] < force[s] for s in NURBS)
+    return Claim(3, text, bool(lower), f"|F| at load factor {load:g}: "
+                 + ", ".join(f"{s} {f:.6g} N" for s, f in force.items()))
+
+
+def claim_lower_von_mises(runs: list[Run], level: int, body: str) -> Claim:
+    """Claim 4: peak von Mises of ``body`` with facets below nurbs_fe at ``level`` (converged runs)."""
+    text = f"facets gives a lower peak von Mises than nurbs_fe in {body} of chain3 (mesh {level})"
+    chosen = {s: _find(runs, s, level) for s in ("facets", "nurbs_fe")}
+    if any(r is None or r.failed for r in chosen.values()):
+        return Claim(4, text, False, f"missing or failed runs at level {level}: "
+                     + ", ".join(f"{s} {r.status if r else 'missing'}" for s, r in chosen.items()))
+    peak = {s: r.max_von_mises(body) for s, r in chosen.items()}
+    return Claim(4, text, bool(peak["facets"] < peak["nurbs_fe"]),
+                 ", ".join(f"{s} {p / 1e6:.6g} MPa" for s, p in peak.items()))
+
+
+def claims(error_tables, chain2_summaries, chain3_summaries, *, rate_tolerance: float,
+           reaction_level: int, pulled: str, component: int, von_mises_level: int,
+           von_mises_body: str) -> list[Claim]:
+    """The four claims from the planar error tables and the chain2 and chain3 run folders."""
+    chain2, chain3 = load_runs(chain2_summaries), load_runs(chain3_summaries)
+    return [claim_optimal_rate(error_tables, rate_tolerance),
+            claim_coarse_facets(chain2, pulled, component),
+            claim_lower_reaction(chain2, reaction_level, pulled, component),
+            claim_lower_von_mises(chain3, von_mises_level, von_mises_body)]
+
+
+def claims_markdown(found: list[Claim]) -> str:
+    lines = ["# The paper's claims, checked on our results", "",
+             "Generated by the pipeline (rule `claims`, `cgfem.report.claims`) from the result "
+             "files; not edited by hand.", "",
+             "| # | claim | reproduced | numbers |", "|---|---|---|---|"]
+    lines += [f"| {c.number} | {c.text} | {'yes' if c.reproduced else 'no'} | {c.numbers} |"
+              for c in found]
+    return "\n".join(lines) + "\n"
+
+
+def write_claims(path: str | Path, found: list[Claim]) -> Path:
+    return write_text_atomic(Path(path), claims_markdown(found))

@@ -1,0 +1,155 @@
+"""Line plots from run results: surface profile (Fig. 10), reactions (Fig. 13) and our own
+validation figures (Newton residuals, time per stage, geometry error)."""
+
+from __future__ import annotations
+
+from collections import defaultdict
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from cgfem.report.runs import BODY, DISPLACEMENT, Run, load_runs
+from cgfem.report.style import FAILED_STYLE, colour, marker, new_figure
+
+AXES = {"x": 0, "y": 1, "z": 2}
+
+
+def _style(run: Run) -> dict:
+    """Line style of a run: colour by surface, marker by level, dashed with crosses if failed."""
+    style = {"color": colour(run.surface), "marker": marker(run.level)}
+    if run.failed:
+        style.update(FAILED_STYLE)
+    return style
+
+
+def _label(run: Run) -> str:
+    return f"{run.label} (failed)" if run.failed else run.label
+
+
+def surface_profile(run: Run, body: str, line: dict[str, float], along: str, component: str,
+                    band: float, step: int = -1) -> tuple[np.ndarray, np.ndarray]:
+    """Boundary points of ``body`` within ``band`` of a straight line parallel to ``along``
+    (``line`` fixes the two other coordinates, e.g. ``{"x": 0.00125, "z": 0.01}``): their
+    coordinate along it (sorted) and displacement ``component`` there, both (n,)."""
+    cloud = run.surface_points(step)
+    x = np.asarray(cloud.points, float)
+    keep = np.asarray(cloud.point_data[BODY]).ravel() == run.body_index(body)
+    for name, value in line.items():
+        keep &= np.abs(x[:, AXES[name]] - value) <= band
+    s = x[keep, AXES[along]]
+    u = np.asarray(cloud.point_data[DISPLACEMENT], float)[keep, AXES[component]]
+    order = np.argsort(s, kind="stable")
+    return s[order], u[order]
+
+
+def fig10_surface_profile(summaries, body: str, line: dict[str, float], along: str = "y",
+                          component: str = "z", band_fraction: float = 0.25) -> Figure:
+    """Displacement ``component`` along a line across a body's surface at the last step, one
+    line per run (the boundary points within ``band_fraction * h`` of the line)."""
+    fig, axes = new_figure(1, 1, width=4.5, height=3.0)
+    ax = axes[0, 0]
+    for run in load_runs(summaries):
+        band = band_fraction * float(run.body(body)["h"])
+        s, u = surface_profile(run, body, line, along, component, band)
+        ax.plot(s, u, linewidth=0.8, markersize=2.5, label=_label(run), **_style(run))
+    where = ", ".join(f"{k} = {v:g}" for k, v in line.items())
+    ax.set(title=f"{body}: u_{component} along {along} at {where}", xlabel=f"{along} (m)",
+           ylabel=f"u_{component} (m)")
+    ax.legend()
+    return fig
+
+
+def fig13_reactions(summaries, pulled: str, clamped: str, component: str = "y") -> Figure:
+    """Reaction ``component`` on the pulled and on the clamped caps vs load factor, every run
+    (failed runs dashed, to their last converged step), and the final pulled reaction vs level
+    per definition (converged runs)."""
+    runs = load_runs(summaries)
+    c = AXES[component]
+    fig, axes = new_figure(1, 3, width=9.0, height=2.9)
+    for ax, key, title in ((axes[0, 0], pulled, "pulled caps"), (axes[0, 1], clamped, "clamped caps")):
+        for run in runs:
+            force = np.concatenate([[0.0], run.reactions(key)[:, c]])
+            load = np.concatenate([[0.0], run.load_factors()])
+            ax.plot(load, force, label=_label(run), **_style(run))
+        ax.set(title=f"{title} ({key})", xlabel="load factor", ylabel=f"reaction F_{component} (N)")
+    axes[0, 0].legend(ncol=2)
+    ax = axes[0, 2]
+    for surface in sorted({r.surface for r in runs}):
+        done = [r for r in runs if r.surface == surface and not r.failed]
+        if not done:
+            continue
+        ax.plot([r.level for r in done], [r.reactions(pulled)[-1, c] for r in done], marker="o",
+                color=colour(surface), label=surface)
+    ax.set(title="final pulled reaction vs level", xlabel="level", ylabel=f"F_{component} (N)")
+    ax.legend()
+    return fig
+
+
+def fig_newton_residuals(summaries) -> Figure:
+    """Relative Newton residual of every iteration of every run, one panel per example."""
+    runs = load_runs(summaries)
+    cases = sorted({r.case for r in runs})
+    fig, axes = new_figure(1, len(cases), width=3.0 * len(cases), height=2.8)
+    for ax, case in zip(axes[0], cases):
+        for run in (r for r in runs if r.case == case):
+            res = run.newton_residuals()
+            ax.semilogy(np.arange(res.size), res, linewidth=0.8, markersize=2, label=_label(run),
+                        **_style(run))
+        ax.set(title=case, xlabel="Newton iteration (all steps and passes)",
+               ylabel="relative residual")
+        ax.legend(ncol=2)
+    return fig
+
+
+def fig_timings(summaries, stages: tuple[str, ...] = ("build_s", "solve_s")) -> Figure:
+    """Seconds per stage vs DOFs, one panel per stage, a line per (example, definition)."""
+    runs = load_runs(summaries)
+    fig, axes = new_figure(1, len(stages), width=3.3 * len(stages), height=2.8)
+    groups = defaultdict(list)
+    for run in runs:
+        groups[run.case, run.surface].append(run)
+    styles = ("-", "--", ":", "-.")
+    cases = sorted({r.case for r in runs})
+    for ax, stage in zip(axes[0], stages):
+        for (case, surface), group in sorted(groups.items()):
+            group.sort(key=lambda r: r.level)
+            ax.loglog([r.dofs for r in group], [r.timings()[stage] for r in group], marker="o",
+                      color=colour(surface), linestyle=styles[cases.index(case) % len(styles)],
+                      label=f"{case} {surface}")
+        ax.set(title=stage.removesuffix("_s"), xlabel="DOFs", ylabel="seconds")
+    axes[0, 0].legend(ncol=2)
+    return fig
+
+
+def geometry_errors(run: Run) -> tuple[float, float]:
+    """Relative error of the quadrature's total volume and area against the exact B-rep's."""
+    bodies = run.summary["bodies"].values()
+    v = sum(b["volume"] for b in bodies), sum(b["brep_volume"] for b in bodies)
+    a = sum(b["area"] for b in bodies), sum(b["brep_area"] for b in bodies)
+    return abs(v[0] - v[1]) / v[1], abs(a[0] - a[1]) / a[1]
+
+
+#: floor of the geometry errors on the log axis (round-off)
+ERROR_FLOOR = 1e-16
+
+
+def fig_geometry_error(summaries) -> Figure:
+    """Relative volume and area error of the quadrature vs level, a line per (example,
+    definition); errors below ``ERROR_FLOOR`` are drawn at it."""
+    runs = load_runs(summaries)
+    groups = defaultdict(list)
+    for run in runs:
+        groups[run.case, run.surface].append(run)
+    cases = sorted({r.case for r in runs})
+    styles = ("-", "--", ":", "-.")
+    fig, axes = new_figure(1, 2, width=7.0, height=2.8)
+    for (case, surface), group in sorted(groups.items()):
+        group.sort(key=lambda r: r.level)
+        errors = np.maximum(np.array([geometry_errors(r) for r in group]), ERROR_FLOOR)
+        for k, ax in enumerate(axes[0]):
+            ax.semilogy([r.level for r in group], errors[:, k], marker="o", color=colour(surface),
+                        linestyle=styles[cases.index(case) % len(styles)], label=f"{case} {surface}")
+    for ax, what in zip(axes[0], ("volume", "area")):
+        ax.set(title=f"{what} of the quadrature", xlabel="level", ylabel=f"relative {what} error")
+    axes[0, 0].legend(ncol=2)
+    return fig

@@ -1,0 +1,157 @@
+"""Reading the result folder of one run (DESIGN.md "Contracts"): the only module of the
+report package that knows file and field names, so a rename is a change here alone.
+
+A run folder ``results/runs/{case}/L{level}_{surface}/`` holds ``summary.json``,
+``step_NNN.vtu`` (hexahedra of all bodies), ``surface_NNN.vtu`` (boundary points) and, with
+contact, ``contact_NNN.vtu`` (slave points); ``NNN`` counts converged steps from 1.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import meshio
+import numpy as np
+
+SUMMARY = "summary.json"
+STEP_VTU = "step_{:03d}.vtu"
+SURFACE_VTU = "surface_{:03d}.vtu"
+CONTACT_VTU = "contact_{:03d}.vtu"
+
+#: point / cell data names of the VTU files
+DISPLACEMENT = "displacement"       # (n, 3)
+STRESS = "stress"                   # (n, 9), Cauchy, row-major
+VON_MISES = "von_mises"             # (n,)
+BODY = "body"                       # body index, in the order of summary["bodies"]
+PATCH = "patch"                     # patch index within the body
+ACTIVE = "active"                   # contact point active (1) or not (0)
+PRESSURE = "pressure"
+
+#: statuses of summary.json
+CONVERGED = "converged"
+FAILED = "failed"
+
+
+@dataclass(frozen=True)
+class Run:
+    """One run folder and its parsed ``summary.json``."""
+
+    folder: Path
+    summary: dict
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Run":
+        """The run whose folder is ``path`` or whose ``summary.json`` is ``path``."""
+        path = Path(path)
+        folder = path.parent if path.name == SUMMARY else path
+        return cls(folder, json.loads((folder / SUMMARY).read_text()))
+
+    @property
+    def case(self) -> str:
+        return str(self.summary["case"])
+
+    @property
+    def level(self) -> int:
+        return int(self.summary["level"])
+
+    @property
+    def surface(self) -> str:
+        return str(self.summary["surface"])
+
+    @property
+    def status(self) -> str:
+        return str(self.summary["status"])
+
+    @property
+    def failed(self) -> bool:
+        return self.status != CONVERGED
+
+    @property
+    def label(self) -> str:
+        return f"{self.surface} L{self.level}"
+
+    @property
+    def steps(self) -> list[dict]:
+        return list(self.summary["steps"])
+
+    @property
+    def n_steps(self) -> int:
+        return len(self.summary["steps"])
+
+    @property
+    def body_names(self) -> list[str]:
+        """Body names in file order (the index stored as ``body`` in the VTU files)."""
+        return list(self.summary["bodies"])
+
+    def body_index(self, name: str) -> int:
+        return self.body_names.index(name)
+
+    @property
+    def dofs(self) -> int:
+        """DOFs of all bodies."""
+        return int(sum(b["dofs"] for b in self.summary["bodies"].values()))
+
+    def body(self, name: str) -> dict:
+        """``summary["bodies"][name]``: nodes, dofs, volume, area, brep_volume, brep_area, h."""
+        return dict(self.summary["bodies"][name])
+
+    def timings(self) -> dict[str, float]:
+        """Seconds per stage: ``build_s``, ``solve_s`` (and whatever else the run timed)."""
+        return {k: float(v) for k, v in self.summary.get("timings", {}).items()}
+
+    def load_factors(self) -> np.ndarray:
+        """(n_steps,) load factor of every converged step."""
+        return np.array([s["load_factor"] for s in self.steps], float)
+
+    def reactions(self, key: str) -> np.ndarray:
+        """(n_steps, 3) reaction force (N) of the displacement entry ``key``
+        (``body/patch+patch``) at every converged step."""
+        return np.array([s["reactions"][key] for s in self.steps], float).reshape(-1, 3)
+
+    def newton_residuals(self) -> np.ndarray:
+        """Relative Newton residuals of every pass of every step, in order (all iterations)."""
+        values: list[float] = []
+        for s in self.steps:
+            passes = s.get("pass_residuals") or [s["newton_residuals"]]
+            for residuals in passes:
+                values.extend(float(r) for r in residuals)
+        return np.array(values)
+
+    def max_von_mises(self, body: str, step: int = -1) -> float:
+        return float(self.steps[step]["max_von_mises"][body])
+
+    def contact_force(self, step: int = -1) -> np.ndarray:
+        return np.asarray(self.steps[step]["contact"]["force"], float)
+
+    def _vtu(self, pattern: str, step: int) -> meshio.Mesh:
+        number = self.n_steps + 1 + step if step < 0 else step
+        return meshio.read(self.folder / pattern.format(number))
+
+    def step_mesh(self, step: int = -1) -> meshio.Mesh:
+        """The hexahedral mesh of a step (1-based number, or negative from the end)."""
+        return self._vtu(STEP_VTU, step)
+
+    def surface_points(self, step: int = -1) -> meshio.Mesh:
+        """The boundary points (reference positions) of a step."""
+        return self._vtu(SURFACE_VTU, step)
+
+    def contact_points(self, step: int = -1) -> meshio.Mesh:
+        return self._vtu(CONTACT_VTU, step)
+
+
+def load_runs(paths) -> list[Run]:
+    """Runs from folders or ``summary.json`` paths, sorted by (case, surface, level)."""
+    runs = [Run.load(p) for p in paths]
+    return sorted(runs, key=lambda r: (r.case, r.surface, r.level))
+
+
+def cell_values(mesh: meshio.Mesh, name: str) -> np.ndarray:
+    """Cell data ``name`` of the (single block) hexahedral mesh."""
+    return np.asarray(mesh.cell_data[name][0])
+
+
+def stress_component(stress: np.ndarray, i: int, j: int) -> np.ndarray:
+    """Component ``sigma_ij`` (n,) of row-major stresses (n, 9)."""
+    return np.asarray(stress)[:, 3 * i + j]

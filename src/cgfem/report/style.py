@@ -1,0 +1,49 @@
+"""The one plotting style of the report: colours per surface definition, figure sizes, and
+saving (PNG at print resolution and PDF), which is the caller's job."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+
+#: colour of each contact-surface definition
+SURFACE_COLOURS = {"facets": "#d95f02", "nurbs_fe": "#1b9e77", "nurbs_fit": "#7570b3"}
+#: marker of each mesh level
+LEVEL_MARKERS = ("o", "s", "^", "D", "v", "P")
+#: line style of a run that failed to converge
+FAILED_STYLE = {"linestyle": "--", "marker": "x"}
+#: print resolution of the PNG files (dots per inch)
+PRINT_DPI = 300
+
+RC = {"font.size": 8, "axes.titlesize": 8, "axes.labelsize": 8, "legend.fontsize": 6.5,
+      "xtick.labelsize": 7, "ytick.labelsize": 7, "lines.linewidth": 1.2, "lines.markersize": 4,
+      "axes.grid": True, "grid.alpha": 0.3, "figure.dpi": 100, "savefig.bbox": "tight"}
+plt.rcParams.update(RC)  # the report's style, for every figure drawn after this import
+
+
+def colour(surface: str) -> str:
+    return SURFACE_COLOURS.get(surface, "black")
+
+
+def marker(level: int) -> str:
+    return LEVEL_MARKERS[level % len(LEVEL_MARKERS)]
+
+
+def new_figure(n_rows: int = 1, n_cols: int = 1, width: float = 6.5, height: float = 2.6,
+               **kwargs) -> tuple[Figure, object]:
+    """A figure of ``n_rows x n_cols`` axes in the report style; ``height`` per row (inches)."""
+    fig, axes = plt.subplots(n_rows, n_cols, figsize=(width, height * n_rows),
+                             squeeze=False, layout="constrained", **kwargs)
+    return fig, axes
+
+
+def save_figure(fig: Figure, png: str | Path, pdf: str | Path) -> None:
+    """Write ``fig`` as PNG (``PRINT_DPI``) and PDF, then close it."""
+    fig.savefig(png, dpi=PRINT_DPI)
+    fig.savefig(pdf)
+    plt.close(fig)

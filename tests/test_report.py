@@ -1,0 +1,335 @@
+"""Figures and claims of cgfem.report, on synthetic run folders that follow the contracts
+(summary.json, step/surface/contact VTU files written with meshio): every assertion is on
+the data the figure draws, not on pixels."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import matplotlib.colors
+import meshio
+import numpy as np
+import pytest
+
+from cgfem.case.load import load_case
+from cgfem.fem.space import Space
+from cgfem.geometry.builders import build_solid
+from cgfem.report import figure
+from cgfem.report.claims import (claim_coarse_facets, claim_lower_reaction, claim_lower_von_mises,
+                                 claim_optimal_rate, claims, write_claims)
+from cgfem.report.convergence import fitted_rate
+from cgfem.report.curves import geometry_errors
+from cgfem.report.energy import ErrorRow, energy_errors, read_error_tables, write_error_table
+from cgfem.report.runs import Run, load_runs
+from cgfem.report.style import save_figure
+from cgfem.run import embed_body
+
+REPO = Path(__file__).resolve().parents[1]
+PULLED, CLAMPED = "link_b/cap_a+cap_b", "link_a/cap_a+cap_b"
+HEX = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
+
+
+def _cloud(path: Path, points: np.ndarray, data: dict) -> None:
+    cells = [("vertex", np.arange(len(points)).reshape(-1, 1))]
+    meshio.write(path, meshio.Mesh(points, cells, point_data=data))
+
+
+def make_run(root: Path, case: str, level: int, surface: str, *, bodies=("link_a", "link_b"),
+             status="converged", reactions=None, von_mises=None, residuals=None,
+             volume_error=0.0, seconds=(1.0, 2.0), surface_cloud=None, active=3) -> Path:
+    """A run folder: one hexahedron and a small boundary cloud per body per step. ``reactions``:
+    (n_steps, 2) F_y on (pulled, clamped); ``von_mises``: peak per step (all bodies)."""
+    folder = root / "runs" / case / f"L{level}_{surface}"
+    folder.mkdir(parents=True)
+    reactions = np.zeros((1, 2)) if reactions is None else np.asarray(reactions, float)
+    n = reactions.shape[0]
+    h = 0.005 / 2**level
+    steps = []
+    for k in range(n):
+        steps.append({
+            "load_factor": (k + 1) / n if status == "converged" else (k + 1) / (n + 1),
+            "newton_residuals": [1.0, 1e-4, 1e-10],
+            "pass_residuals": residuals if residuals is not None else [[1.0, 1e-4, 1e-10], [1e-6, 1e-12]],
+            "outer_passes": 2,
+            "reactions": {PULLED: [0.0, reactions[k, 0], 0.0], CLAMPED: [0.0, reactions[k, 1], 0.0]},
+            "contact": {"force": [0.0, 1.0, 0.0], "active_points": active, "max_pressure": 1.0, "pairs": {}},
+            "max_von_mises": {b: float(von_mises if von_mises is not None else 1e6) for b in bodies},
+            "error_estimate": {b: 0.1 for b in bodies}, "energy_norm": {b: 1.0 for b in bodies},
+            "seconds": 0.5})
+        points = np.concatenate([HEX * h + 0.1 * i for i in range(len(bodies))])
+        cells = np.arange(8 * len(bodies)).reshape(-1, 8)
+        meshio.write(folder / f"step_{k + 1:03d}.vtu", meshio.Mesh(
+            points, [("hexahedron", cells)],
+            point_data={"displacement": np.full((len(points), 3), 1e-4 * (k + 1)),
+                        "stress": np.tile(np.arange(9.0), (len(points), 1)) * (k + 1),
+                        "von_mises": np.ones(len(points))},
+            cell_data={"status": [np.ones(len(bodies), np.int32)], "element_von_mises": [np.ones(len(bodies))],
+                       "body": [np.arange(len(bodies), dtype=np.int32)]}))
+        if surface_cloud is None:
+            x = np.random.default_rng(k).random((10 * len(bodies), 3)) * 0.01
+            body = np.repeat(np.arange(len(bodies)), 10).astype(np.int32)
+            u = x * (k + 1) * 1e-2
+            stress = np.outer(x[:, 1], np.arange(9.0)) * 1e8
+            vm = 1e6 * (1.0 + body + x[:, 0])
+            _cloud(folder / f"surface_{k + 1:03d}.vtu", x, {
+                "displacement": u, "stress": stress, "von_mises": vm, "body": body,
+                "patch": np.zeros(len(x), np.int32)})
+        else:
+            _cloud(folder / f"surface_{k + 1:03d}.vtu", *surface_cloud(k))
+        xc = np.random.default_rng(100 + k).random((6, 3)) * 0.01
+        _cloud(folder / f"contact_{k + 1:03d}.vtu", xc, {
+            "gap": np.zeros(6), "pressure": -np.ones(6), "active": (np.arange(6) < active).astype(np.int32),
+            "normal": np.tile([0, 0, 1.0], (6, 1)), "weight": np.ones(6), "pair": np.zeros(6, np.int32)})
+    summary = {
+        "case": case, "level": level, "surface": surface, "status": status,
+        "message": "" if status == "converged" else "Newton failed after 5 cut-backs",
+        "bodies": {b: {"nodes": 8, "dofs": 24 * 8**level, "volume": 1.0 + volume_error, "area": 2.0,
+                       "brep_volume": 1.0, "brep_area": 2.0, "h": h} for b in bodies},
+        "steps": steps, "timings": {"build_s": seconds[0], "solve_s": seconds[1]}, "versions": {}}
+    (folder / "summary.json").write_text(json.dumps(summary))
+    return folder / "summary.json"
+
+
+def _lines(ax):
+    return [line for line in ax.get_lines() if not line.get_label().startswith("optimal")]
+
+
+# ---------------------------------------------------------------- rates and fig09
+
+
+def test_fitted_rate_recovers_the_synthetic_rate():
+    h = 0.01 / 2.0 ** np.arange(4)
+    assert fitted_rate(h, 3.7 * h**0.8731) == pytest.approx(0.8731, abs=1e-10)
+
+
+def _error_rows(rate_of):
+    rows = []
+    for surface, p in rate_of.items():
+        for level in range(4):
+            h = 0.00125 / 2**level
+            for body, c in (("lower", 0.3), ("upper", 0.5)):
+                rows.append(ErrorRow(surface, level, body, 600 * 8**level, h, c * (h / 0.00125) ** p))
+    return rows
+
+
+def test_fig09_draws_every_definition_with_its_fitted_rate(tmp_path):
+    rate_of = {"facets": 0.71, "nurbs_fe": 0.93, "nurbs_fit": 1.02}
+    table = tmp_path / "errors.csv"
+    write_error_table(_error_rows(rate_of), table)
+    assert read_error_tables([table]) == _error_rows(rate_of)
+    fig = figure("fig09", [table])
+    assert len(fig.axes) == 2
+    for ax in fig.axes:
+        lines = _lines(ax)
+        assert len(lines) == 3
+        for line in lines:
+            surface, rate = line.get_label().split(": rate ")
+            assert float(rate) == pytest.approx(rate_of[surface], abs=0.005)
+            assert list(line.get_xdata()) == [600 * 8**k for k in range(4)]
+        triangle = [line for line in ax.get_lines() if line.get_label().startswith("optimal")]
+        x, y = triangle[0].get_xdata(), triangle[0].get_ydata()
+        assert np.log(y[1] / y[0]) / np.log(x[1] / x[0]) == pytest.approx(-1.0 / 3.0, rel=1e-12)
+    save_figure(fig, tmp_path / "f.png", tmp_path / "f.pdf")
+    assert (tmp_path / "f.png").stat().st_size > 1000 and (tmp_path / "f.pdf").stat().st_size > 1000
+
+
+# ---------------------------------------------------------------- energy error of a run
+
+
+def test_energy_error_of_a_linear_field_is_exact(tmp_path):
+    """A linear displacement u = G x is reproduced exactly by H8: the strain at every volume
+    point is sym(G), so against a constant reference strain the relative error is known."""
+    case_file = REPO / "config" / "cases" / "planar.yaml"
+    case = load_case(case_file)
+    G = np.array([[1.0, 2.0, 0.0], [0.5, -3.0, 1.0], [0.0, 4.0, 2.0]]) * 1e-4
+    folder = tmp_path / "L0_nurbs_fe"
+    folder.mkdir()
+    points, cells, body_of_cell, shift, bodies = [], [], [], 0, {}
+    for index, body in enumerate(case.bodies):
+        space = Space.from_embedding(embed_body(build_solid(body.geometry), body, 0, "nurbs_fe"))
+        points.append(space.coordinates)
+        cells.append(space.connectivity + shift)
+        body_of_cell.append(np.full(space.n_elements, index, np.int32))
+        shift += space.n_nodes
+        bodies[body.name] = {"nodes": space.n_nodes, "dofs": space.n_dofs, "volume": 0, "area": 0,
+                             "brep_volume": 0, "brep_area": 0, "h": space.h}
+    x = np.concatenate(points)
+    meshio.write(folder / "step_001.vtu", meshio.Mesh(
+        x, [("hexahedron", np.concatenate(cells))], point_data={"displacement": x @ G.T},
+        cell_data={"body": [np.concatenate(body_of_cell)]}))
+    (folder / "summary.json").write_text(json.dumps({
+        "case": "planar", "level": 0, "surface": "nurbs_fe", "status": "converged",
+        "bodies": bodies, "steps": [{"load_factor": 1.0}]}))
+    eps_ref = {"lower": np.diag([0.0, 1e-4, -2e-4]), "upper": np.diag([0.0, -1e-4, 3e-4])}
+    volumes = {}
+
+    def error(xq, w, strain, body):
+        volumes[body] = w.sum()
+        d = strain - eps_ref[body]
+        return np.sqrt(np.einsum("p,pij,pij->", w, d, d) / np.einsum("p,ij,ij->", w, eps_ref[body], eps_ref[body]))
+
+    rows = energy_errors(case_file, folder, error)
+    sym = 0.5 * (G + G.T)
+    for row in rows:
+        exact = np.linalg.norm(sym - eps_ref[row.body]) / np.linalg.norm(eps_ref[row.body])
+        assert row.error == pytest.approx(exact, rel=1e-10)
+        assert row.dofs == sum(b["dofs"] for b in bodies.values())
+        assert volumes[row.body] == pytest.approx(0.0025 * 0.01 * 0.01, rel=1e-10)
+    assert {r.body for r in rows} == {"lower", "upper"}
+
+
+# ---------------------------------------------------------------- line figures
+
+
+def test_fig10_profile_takes_the_points_near_the_line(tmp_path):
+    y = np.linspace(0.0, 0.01, 11)
+
+    def cloud(k):
+        on_line = np.column_stack([np.full(11, 0.00125), y, np.full(11, 0.01)])
+        off_x = on_line + [0.001, 0.0, 0.0]                 # outside the band in x
+        upper = on_line.copy()                               # same place, other body
+        x = np.concatenate([on_line, off_x, upper])
+        body = np.repeat([0, 0, 1], 11).astype(np.int32)
+        u = np.zeros((33, 3))
+        u[:, 2] = -1e-6 * (1 + x[:, 1] * 100) * (1 + body)
+        u[11:22, 2] = 5.0
+        return x, {"displacement": u, "body": body}
+
+    paths = [make_run(tmp_path, "planar", 2, s, bodies=("lower", "upper"), surface_cloud=cloud)
+             for s in ("facets", "nurbs_fit")]
+    fig = figure("fig10", paths, body="lower", line={"x": 0.00125, "z": 0.01})
+    lines = fig.axes[0].get_lines()
+    assert len(lines) == 2
+    for line in lines:
+        np.testing.assert_allclose(line.get_xdata(), y)
+        np.testing.assert_allclose(line.get_ydata(), -1e-6 * (1 + y * 100))
+
+
+def test_fig13_draws_every_run_and_a_failed_one_as_failed(tmp_path):
+    good = np.column_stack([np.arange(1, 6) * 10.0, -np.arange(1, 6) * 10.0])
+    paths = [make_run(tmp_path, "chain2_steel", level, s, reactions=good * (1 + level))
+             for s in ("nurbs_fe", "nurbs_fit") for level in (0, 1)]
+    paths.append(make_run(tmp_path, "chain2_steel", 0, "facets", status="failed", reactions=good[:2]))
+    fig = figure("fig13", paths, pulled=PULLED, clamped=CLAMPED)
+    pulled, clamped, by_level = fig.axes[:3]
+    for ax, column in ((pulled, 0), (clamped, 1)):
+        lines = ax.get_lines()
+        assert len(lines) == 5
+        failed = [line for line in lines if "failed" in line.get_label()]
+        assert len(failed) == 1 and failed[0].get_linestyle() == "--" and failed[0].get_marker() == "x"
+        np.testing.assert_allclose(failed[0].get_ydata(), np.concatenate([[0.0], good[:2, column]]))
+        solid = [line for line in lines if line.get_linestyle() == "-"]
+        assert len(solid) == 4 and all(line.get_xdata()[-1] == 1.0 for line in solid)
+    finals = {line.get_label(): list(line.get_ydata()) for line in by_level.get_lines()}
+    assert finals == {"nurbs_fe": [50.0, 100.0], "nurbs_fit": [50.0, 100.0]}
+
+
+def test_newton_timings_and_geometry_figures(tmp_path):
+    paths = []
+    for case in ("planar", "chain3"):
+        for level in (0, 1):
+            paths.append(make_run(tmp_path, case, level, "nurbs_fe", residuals=[[1.0, 0.1, 1e-3, 1e-9]],
+                                  volume_error=10.0 ** (-3 - level), seconds=(level + 1.0, 3.0 * level + 1)))
+    fig = figure("newton", paths)
+    assert len(fig.axes) == 2
+    for ax in fig.axes:
+        assert len(ax.get_lines()) == 2
+        np.testing.assert_allclose(ax.get_lines()[0].get_ydata(), [1.0, 0.1, 1e-3, 1e-9])
+    fig = figure("timings", paths)
+    build, solve = fig.axes[:2]
+    assert len(build.get_lines()) == 2
+    np.testing.assert_allclose(build.get_lines()[0].get_xdata(), [48, 384])
+    np.testing.assert_allclose(solve.get_lines()[0].get_ydata(), [1.0, 4.0])
+    fig = figure("geometry", paths)
+    volume, area = fig.axes[:2]
+    np.testing.assert_allclose(volume.get_lines()[0].get_ydata(), [1e-3, 1e-4], rtol=1e-9)
+    np.testing.assert_allclose(area.get_lines()[0].get_ydata(), [1e-16, 1e-16])
+    assert geometry_errors(Run.load(paths[0]))[0] == pytest.approx(1e-3)
+
+
+# ---------------------------------------------------------------- maps (pyvista off-screen)
+
+
+
+def test_map_figures_one_panel_per_run(tmp_path):
+    paths = [make_run(tmp_path, "chain2_steel", 0, s, reactions=np.ones((2, 2))) for s in ("facets", "nurbs_fe")]
+    paths.append(make_run(tmp_path, "chain2_steel", 1, "nurbs_fit", status="failed", reactions=np.ones((1, 2))))
+    fig = figure("fig14", paths)
+    panels = [ax for ax in fig.axes if ax.images]
+    assert len(panels) == 3
+    assert [ax.get_title() for ax in panels] == ["facets L0", "nurbs_fe L0", "nurbs_fit L1 (failed at step 2)"]
+    assert all(ax.images[0].get_array().std() > 0 for ax in panels)       # something was drawn
+    sigma_yy = [np.asarray(meshio.read(Path(p).parent / f"surface_{Run.load(p).n_steps:03d}.vtu")
+                           .point_data["stress"])[:, 4] for p in paths]
+    limits = fig.axes[-1].get_ylim()
+    assert limits == pytest.approx((min(s.min() for s in sigma_yy), max(s.max() for s in sigma_yy)))
+
+    fig = figure("fig15", paths[:2])
+    titles = [ax.get_title() for ax in fig.axes if ax.images]
+    assert titles == ["facets L0: 3 active points", "nurbs_fe L0: 3 active points"]
+
+    chain3 = [make_run(tmp_path, "chain3", 0, s, bodies=("link_a", "link_c", "link_b"), von_mises=v)
+              for s, v in (("facets", 2e8), ("nurbs_fe", 3e8))]
+    fig = figure("fig17", chain3, body="link_c")
+    titles = [ax.get_title() for ax in fig.axes if ax.images]
+    assert titles == ["facets L0: peak 200 MPa", "nurbs_fe L0: peak 300 MPa"]
+    vm = np.asarray(meshio.read(Path(chain3[0]).parent / "surface_001.vtu").point_data["von_mises"])[10:20]
+    assert fig.axes[-1].get_ylim() == pytest.approx((vm.min(), vm.max()))
+
+
+# ---------------------------------------------------------------- claims
+
+
+def _chain2(root, facets_status="converged", facets_scale=0.5, nurbs_scale=1.0):
+    base = np.column_stack([np.arange(1, 6) * 100.0, -np.arange(1, 6) * 100.0])
+    paths = []
+    for level in (0, 1, 2):
+        converge = 1.0 + 0.5 / 4**level            # stiff on coarse meshes, O(h^2) to the limit
+        for s in ("nurbs_fe", "nurbs_fit"):
+            paths.append(make_run(root, "chain2_steel", level, s, reactions=base * converge * nurbs_scale))
+        status = facets_status if level == 0 else "converged"
+        scale = facets_scale[level] if isinstance(facets_scale, dict) else facets_scale
+        f = base[:2] if status == "failed" else base * converge * scale
+        paths.append(make_run(root, "chain2_steel", level, "facets", status=status, reactions=f))
+    return paths
+
+
+@pytest.mark.parametrize("holds", [True, False])
+def test_claims_follow_the_fixture(tmp_path, holds):
+    table = tmp_path / "errors.csv"
+    write_error_table(_error_rows({"facets": 0.95 if holds else 0.6, "nurbs_fe": 1.0, "nurbs_fit": 1.1}), table)
+    chain2 = _chain2(tmp_path, facets_status="failed" if holds else "converged",
+                     facets_scale=0.9 if holds else {0: 1.0 / 1.5, 1: 1.1, 2: 1.1})
+    chain3 = [make_run(tmp_path, "chain3", 1, s, bodies=("link_a", "link_c", "link_b"), von_mises=v)
+              for s, v in (("facets", 2e8 if holds else 4e8), ("nurbs_fe", 3e8))]
+    found = claims([table], chain2, chain3, rate_tolerance=0.1, reaction_level=2, pulled=PULLED,
+                   component=1, von_mises_level=1, von_mises_body="link_c")
+    assert [c.reproduced for c in found] == [holds] * 4
+    text = write_claims(tmp_path / "claims.md", found).read_text()
+    assert text.count("| yes |") == (4 if holds else 0) and text.count("| no |") == (0 if holds else 4)
+    assert holds or "facets: lower 0.600, upper 0.600" in text
+
+
+def test_claim_two_poor_facets_and_failing_nurbs(tmp_path):
+    # facets converges on the coarse mesh but further from the reference than both NURBS: poor
+    runs = load_runs(_chain2(tmp_path / "a", facets_scale=2.0))
+    claim = claim_coarse_facets(runs, PULLED, 1)
+    assert claim.reproduced and "facets 190.91%, nurbs_fe 45.45%" in claim.numbers
+    # a NURBS definition failing on the coarse mesh breaks the claim even if facets fails too
+    paths = _chain2(tmp_path / "b", facets_status="failed")
+    bad = Path(paths[1]).parent                      # nurbs_fit L0
+    summary = json.loads((bad / "summary.json").read_text())
+    summary["status"] = "failed"
+    (bad / "summary.json").write_text(json.dumps(summary))
+    assert not claim_coarse_facets(load_runs(paths), PULLED, 1).reproduced
+
+
+def test_claims_with_missing_runs_are_not_reproduced(tmp_path):
+    table = tmp_path / "errors.csv"
+    write_error_table([r for r in _error_rows({"facets": 1.0, "nurbs_fe": 1.0, "nurbs_fit": 1.0})
+                       if r.surface != "nurbs_fit"], table)
+    assert not claim_optimal_rate([table], 0.1).reproduced
+    runs = load_runs([make_run(tmp_path, "chain2_steel", 2, "facets", reactions=np.ones((5, 2)))])
+    assert not claim_lower_reaction(runs, 2, PULLED, 1).reproduced
+    assert not claim_lower_von_mises(runs, 2, "link_c").reproduced
