@@ -53,13 +53,13 @@ def locate(x, origin, h, shape, elements, tol, slots, xi):
     """Active element ``slots`` (n,) and local coordinates ``xi`` (n, 3) of points ``x`` (n, 3)
     in a grid (``origin`` (3,), cube size ``h``, ``shape`` (3,) elements per axis) whose
     active elements are the ascending grid ids ``elements``. A point within ``tol`` (in units
-    of ``h``) of a grid plane is also looked for in the element across the plane: the
-    candidates are tried in order (the element holding ``floor`` of the point's grid
-    coordinates first, then the neighbours across nearby planes, lower before upper, axis 0
-    slowest) and the first active one is taken. Points in no active element get slot -1
-    and NaN local coordinates."""
+    of ``h``) of a grid plane is on that plane, whichever side round-off put it: it belongs
+    first to the element above the plane (whose lower face holds it), then to the one
+    below; the candidates are tried in that order per axis (axis 0 slowest) and the first
+    active one is taken. Points in no active element get slot -1 and NaN local
+    coordinates."""
     n_el = elements.size
-    cand = np.empty((3, 3), np.int64)
+    cand = np.empty((3, 2), np.int64)
     n_cand = np.empty(3, np.int64)
     t = np.empty(3)
     for p in range(x.shape[0]):
@@ -71,15 +71,10 @@ def locate(x, origin, h, shape, elements, tol, slots, xi):
             if not np.isfinite(t[d]):
                 ok = False
                 continue
-            b = np.int64(np.floor(t[d]))
+            b = np.int64(np.floor(t[d] + tol))   # a point on plane b is in element b first
             cand[d, 0] = b
-            n_cand[d] = 1
-            if t[d] - b <= tol:
-                cand[d, n_cand[d]] = b - 1
-                n_cand[d] += 1
-            if b + 1 - t[d] <= tol:
-                cand[d, n_cand[d]] = b + 1
-                n_cand[d] += 1
+            cand[d, 1] = b - 1
+            n_cand[d] = 2 if t[d] - b <= tol else 1
         if not ok:
             continue
         for q0 in range(n_cand[0]):
