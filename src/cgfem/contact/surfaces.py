@@ -30,7 +30,7 @@ from scipy.spatial import cKDTree
 
 from cgfem.contact.kinematics import MasterPoints, SlaveFrames
 from cgfem.embedding.partition import SurfaceQuadrature
-from cgfem.fem.space import NODE_XI, Space
+from cgfem.fem.space import NODE_XI, Space, shape_functions
 from cgfem.geometry.solid import Solid
 
 #: Newton iterations of the NURBS+FE ray tracing, and its tolerance (fraction of h)
@@ -43,18 +43,17 @@ FACET_TOL = 1e-10
 
 
 def shape_derivatives(xi: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """H8 shape functions (n, 8), physical gradients (n, 8, 3) and second derivatives
-    (n, 8, 3, 3) at local coordinates ``xi`` (n, 3) of a cube of size ``h``."""
+    """H8 shape functions (n, 8), physical gradients (n, 8, 3) (:func:`shape_functions`) and
+    physical second derivatives (n, 8, 3, 3) at local coordinates ``xi`` (n, 3) of a cube of
+    size ``h``: ``d2N_a/dX_i dX_j = (2/h)^2 s_ai s_aj (1 + s_ak xi_k) / 8`` for ``i != j``
+    (``k`` the third axis), zero on the diagonal."""
+    xi = np.ascontiguousarray(xi, dtype=float)
+    N, dN = shape_functions(xi, h)
     f = 1.0 + xi[:, None, :] * NODE_XI[None, :, :]                 # (n, 8, 3)
-    N = np.prod(f, axis=2) / 8.0
-    s = NODE_XI[None, :, :] * (2.0 / h)
-    dN = np.empty(f.shape)
-    dN[..., 0] = s[..., 0] * f[..., 1] * f[..., 2] / 8.0
-    dN[..., 1] = s[..., 1] * f[..., 0] * f[..., 2] / 8.0
-    dN[..., 2] = s[..., 2] * f[..., 0] * f[..., 1] / 8.0
+    s = NODE_XI * (2.0 / h)
     d2N = np.zeros(f.shape + (3,))
     for i, j, k in ((0, 1, 2), (0, 2, 1), (1, 2, 0)):
-        d2N[..., i, j] = d2N[..., j, i] = s[..., i] * s[..., j] * f[..., k] / 8.0
+        d2N[..., i, j] = d2N[..., j, i] = s[None, :, i] * s[None, :, j] * f[..., k] / 8.0
     return N, dN, d2N
 
 
