@@ -117,7 +117,7 @@ def test_defaults_are_filled(tmp_path: Path) -> None:
     del data["contact"][0]["kappa"]
     case = parse_case(data, tmp_path)
     assert case.steps == 1
-    assert case.solver == SolverOptions(newton_tol=1e-9, max_newton=30, outer_passes=4, linear="auto")
+    assert case.solver == SolverOptions(newton_tol=1e-9, max_newton=30, outer_passes=50, linear="auto")
     assert case.body("lower").grid.offset == (0.0, 0.0, 0.0)
     assert case.contact[0].kappa == 10.0
     del data["contact"]
@@ -139,9 +139,11 @@ def test_schema_is_valid_and_its_defaults_match_the_dataclasses() -> None:
 
 
 def test_material_lame_parameters() -> None:
-    lam, mu = Material("neo_hookean", 1.0e9, 0.25).lame()
-    assert lam == pytest.approx(0.4e9, rel=1e-15)
-    assert mu == pytest.approx(0.4e9, rel=1e-15)
+    lam, mu = Material("neo_hookean", 1.0e9, 0.3).lame()
+    assert lam == pytest.approx(1.0e9 * 0.3 / (1.3 * 0.4), rel=1e-15)
+    assert mu == pytest.approx(1.0e9 / 2.6, rel=1e-15)
+    assert Material("neo_hookean", 1.0e9, 0.3).lame() == (lam, mu)
+    assert Material("neo_hookean", 1.0e9, 0.3).lame().mu == mu
 
 
 def test_all_builders_and_their_patches(tmp_path: Path) -> None:

@@ -1,5 +1,5 @@
-"""The ``cgfem check`` command: exact numbers on good cases, exit code 2 with a one-line
-message naming the field on bad ones."""
+"""The ``cgfem check`` and ``cgfem run`` commands: exact numbers on good cases, exit code 2
+with a one-line message naming the field on bad ones, and a refused run leaves no folder."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from cgfem.cli import main
+from cgfem.errors import InputError
 from cgfem.geometry.builders import build_solid
 from cgfem.geometry.io import solid_to_dict, write_solid
 from cgfem.geometry.specs import BoxSpec
@@ -158,3 +159,68 @@ def test_check_level_reports_grid_quadrature(tmp_path, capsys):
 def test_check_level_needs_nonnegative(tmp_path, capsys):
     assert main(["check", _write(tmp_path, GOOD), "--level", "-1"]) == 2
     assert "--level" in capsys.readouterr().err
+
+
+def test_check_surface_needs_level(tmp_path, capsys):
+    assert main(["check", _write(tmp_path, GOOD), "--surface", "facets"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--surface" in err[0] and "--level" in err[0]
+
+
+def _one_error_line(capsys, field: str) -> str:
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("cgfem: error: ") and field in lines[0], captured.err
+    return lines[0]
+
+
+@pytest.mark.parametrize("under", [False, True])
+def test_run_out_on_a_file_is_bad_input(tmp_path, capsys, under):
+    existing = tmp_path / "results"
+    existing.write_text("not a folder")
+    out = existing / "run1" if under else existing
+    code = main(["run", _write(tmp_path, GOOD), "--level", "0", "--surface", "nurbs_fe", "--out", str(out)])
+    assert code == 2
+    assert "a file, not a folder" in _one_error_line(capsys, "--out")
+    assert existing.read_text() == "not a folder"
+
+
+def test_refused_run_leaves_no_folder(tmp_path, capsys):
+    """Refused by the memory estimate: neither the folder nor its missing parents appear."""
+    out = tmp_path / "a" / "b"
+    code = main(["run", _write(tmp_path, GOOD), "--level", "40", "--surface", "nurbs_fe", "--out", str(out)])
+    assert code == 2
+    _one_error_line(capsys, "--level")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["case.yaml"]
+
+
+def test_bad_input_after_the_folder_was_made_removes_it(tmp_path, capsys, monkeypatch):
+    """Bad input found once the run started (here raised by the solver) removes the folders
+    the run created, and only those: a folder that held a file before is kept."""
+    import cgfem.run
+
+    def refuse(*args, **kwargs):
+        assert (tmp_path / "a" / "b").is_dir()      # the run had created its folder
+        raise InputError("solver.linear", "refused for the test")
+
+    monkeypatch.setattr(cgfem.run, "solve_static", refuse)
+    block_only = GOOD.replace("  ring:\n    geometry: " + TORUS + "\n", "").replace(
+        "    material: {model: linear_elastic, E: 1.0e9, nu: 0.3}\n    grid: {h0: 0.005}\n", "", 1)
+    case = _write(tmp_path, block_only)
+    code = main(["run", case, "--level", "0", "--surface", "nurbs_fe", "--out", str(tmp_path / "a" / "b"),
+                 "--quiet"])
+    assert code == 2
+    _one_error_line(capsys, "solver.linear")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["case.yaml"]
+    kept = tmp_path / "kept"
+    kept.mkdir()
+    (kept / "notes.txt").write_text("mine")
+    monkeypatch.setattr(cgfem.run, "solve_static", lambda *a, **k: refuse_kept(kept))
+    assert main(["run", case, "--level", "0", "--surface", "nurbs_fe", "--out", str(kept / "run"),
+                 "--quiet"]) == 2
+    assert sorted(p.name for p in kept.iterdir()) == ["notes.txt"]
+
+
+def refuse_kept(folder):
+    assert (folder / "run").is_dir()
+    raise InputError("solver.linear", "refused for the test")

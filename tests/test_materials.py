@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from cgfem.case.model import Lame, Material
 from cgfem.errors import InputError
 from cgfem.fem import _material_kernels as _k
 from cgfem.fem.materials import (
@@ -27,7 +28,7 @@ from cgfem.fem.materials import (
 )
 
 E, NU = 210.0e3, 0.3
-MU, LAM = lame(E, NU)
+LAM, MU = lame(E, NU)
 MODELS = {"linear_elastic": LINEAR_ELASTIC, "neo_hookean": NEO_HOOKEAN}
 FD_STEP = 1e-6
 
@@ -67,7 +68,7 @@ def rel(a: np.ndarray, b: np.ndarray) -> float:
 @pytest.mark.parametrize("nu", [0.3, 0.45])
 def test_tangent_is_derivative_of_stress(name: str, nu: float) -> None:
     model = MODELS[name]
-    mu, lam = lame(E, nu)
+    lam, mu = lame(E, nu)
     for H in random_gradients(20, seed=1):
         _, _, A = stress_tangent_at(model, H, mu, lam)
         A_fd = np.empty((3, 3, 3, 3))
@@ -186,7 +187,7 @@ def test_inadmissible_state_rejected(H: np.ndarray) -> None:
 @pytest.mark.parametrize("stretch", [0.6, 0.95, 1.05, 1.7, 3.0])
 @pytest.mark.parametrize("nu", [0.0, 0.3, 0.49, -0.2])
 def test_uniaxial_closed_form(stretch: float, nu: float) -> None:
-    mu, lam = lame(E, nu)
+    lam, mu = lame(E, nu)
     t, P11 = uniaxial_stretch_neo_hookean(stretch, E, nu)
     # lateral stress vanishes at the returned lateral stretch (to rounding of mu (t^2 - 1))
     assert abs(mu * (t - 1.0 / t) + lam * np.log(stretch * t * t) / t) <= 1e-14 * (mu + abs(lam))
@@ -229,7 +230,11 @@ def test_von_mises() -> None:
 
 
 def test_lame_and_model_id() -> None:
-    mu, lam = lame(E, NU)
+    lam, mu = lame(E, NU)
+    # one order everywhere: the case file's material gives the same named pair
+    assert lame(E, NU) == Material("neo_hookean", E, NU).lame()
+    assert (lame(E, NU).lam, lame(E, NU).mu) == (lam, mu)
+    assert lam != mu and Lame(lam=1.0, mu=2.0) == (1.0, 2.0)
     assert mu == pytest.approx(E / (2 * (1 + NU)), rel=1e-15)
     assert lam == pytest.approx(E * NU / ((1 + NU) * (1 - 2 * NU)), rel=1e-15)
     # E = mu (3 lam + 2 mu) / (lam + mu)

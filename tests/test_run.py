@@ -1,4 +1,5 @@
-"""``cgfem run``: result files, exit codes, progress, memory guard."""
+"""``cgfem run``: result files, exit codes, progress, memory guard, the outer loop run to
+``outer_tol``."""
 
 from __future__ import annotations
 
@@ -24,7 +25,7 @@ LINK = textwrap.dedent("""\
     boundary:
       - {body: link, patches: [cap_a], type: displacement, components: {x: 0, y: 0, z: 0}}
       - {body: link, patches: [cap_b], type: displacement, components: {x: 0, y: -0.002, z: 0}}
-    solver: {outer_passes: 6}
+    solver: {outer_tol: 1.0e-6}
     """)
 
 CRUSH = textwrap.dedent("""\
@@ -60,6 +61,7 @@ def test_run_writes_summary_and_steps(tmp_path, capsys):
     assert "newton" in err and "step 2 converged" in err
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "converged"
+    assert all(s["outer_converged"] and s["outer_changes"][-1] <= 1e-6 for s in summary["steps"])
     assert (summary["case"], summary["level"], summary["surface"]) == ("link_pull", 0, "nurbs_fe")
     body = summary["bodies"]["link"]
     assert body["dofs"] == 3 * body["nodes"]
@@ -72,11 +74,17 @@ def test_run_writes_summary_and_steps(tmp_path, capsys):
     assert np.linalg.norm(ra + rb) < 1e-9 * np.linalg.norm(ra)
     assert rb[1] < 0 < ra[1]
     assert last["max_von_mises"]["link"] > 0 and last["newton_residuals"][-1] < last["newton_residuals"][0]
-    assert sorted(p.name for p in out.iterdir()) == ["step_001.vtu", "step_002.vtu", "summary.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["step_001.vtu", "step_002.vtu", "summary.json",
+                                                     "surface_001.vtu", "surface_002.vtu"]
     mesh = meshio.read(out / "step_002.vtu")
     assert mesh.points.shape[0] == body["nodes"]
-    assert {"displacement", "stress", "von_mises"} <= set(mesh.point_data)
-    assert {"status", "element_von_mises"} <= set(mesh.cell_data)
+    assert {"displacement", "stress", "von_mises_nodal"} <= set(mesh.point_data)
+    assert {"status", "von_mises_max_qp"} <= set(mesh.cell_data)
+    # the summary's maximum is the VTU's element maximum at material points; the nodal
+    # maximum (nodes of cut elements lie outside the body) is reported beside it
+    assert last["max_von_mises"]["link"] == pytest.approx(mesh.cell_data["von_mises_max_qp"][0].max(), rel=1e-12)
+    assert last["von_mises_max_nodal"]["link"] == pytest.approx(mesh.point_data["von_mises_nodal"].max(),
+                                                                 rel=1e-12)
     assert mesh.point_data["displacement"].shape == (body["nodes"], 3)
 
 
@@ -115,7 +123,7 @@ def test_memory_guard_message_names_the_need(tmp_path, capsys):
 
 
 def test_run_rejects_case_errors_like_check(tmp_path, capsys):
-    bad = LINK.replace("outer_passes: 6", "outer_passes: 6, ghost_penalty: -1")
+    bad = LINK.replace("outer_tol: 1.0e-6", "outer_tol: 1.0e-6, ghost_penalty: -1")
     code = main(["run", _write(tmp_path, bad), "--level", "0", "--surface", "facets", "--out", str(tmp_path)])
     assert code == 2
     assert "ghost_penalty" in capsys.readouterr().err
@@ -157,7 +165,8 @@ def test_uniform_stress_run_reports_its_von_mises_and_reactions(tmp_path):
     assert abs(step["max_von_mises"]["b"] - vm) < 1e-8 * vm
     assert np.allclose(step["reactions"]["b/xmin+ymin+zmin"], -sigma.sum(axis=1), rtol=0, atol=1e-8 * vm)
     mesh = meshio.read(tmp_path / "step_001.vtu")
-    assert np.allclose(mesh.point_data["von_mises"], vm, rtol=1e-8)
+    assert np.allclose(mesh.point_data["von_mises_nodal"], vm, rtol=1e-8)
+    assert abs(step["von_mises_max_nodal"]["b"] - vm) < 1e-8 * vm
     assert np.allclose(mesh.point_data["stress"], sigma.ravel(), rtol=0, atol=1e-8 * vm)
 
 
@@ -165,7 +174,7 @@ def test_unavailable_linear_backend_is_bad_input(tmp_path, capsys, monkeypatch):
     import cgfem.run
 
     monkeypatch.setattr(cgfem.run, "available_backends", lambda: ("superlu", "pyamg"))
-    case = _write(tmp_path, LINK.replace("outer_passes: 6", "outer_passes: 6, linear: pardiso"))
+    case = _write(tmp_path, LINK.replace("outer_tol: 1.0e-6", "outer_tol: 1.0e-6, linear: pardiso"))
     code = main(["run", case, "--level", "0", "--surface", "facets", "--out", str(tmp_path / "o")])
     assert code == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -177,8 +186,7 @@ def test_rubber_link_pulled_by_1_75_radii_converges(tmp_path):
     With moment-fitted rules on every cut element (points in the void, signed weights) the
     Newton solves stalled beyond load factor 0.99 and the run failed after 5 cut-backs; with
     the positive in-material rules it converges in 3 steps, and the caps' reactions balance."""
-    case = (LINK.replace("steps: 2", "steps: 3").replace("y: -0.002", "y: -0.035")
-            .replace("outer_passes: 6", "outer_passes: 4"))
+    case = LINK.replace("steps: 2", "steps: 3").replace("y: -0.002", "y: -0.035")
     out = tmp_path / "out"
     assert main(["run", _write(tmp_path, case), "--level", "1", "--surface", "nurbs_fe",
                  "--out", str(out), "--quiet"]) == 0
@@ -188,3 +196,89 @@ def test_rubber_link_pulled_by_1_75_radii_converges(tmp_path):
     a, b = (np.array(last["reactions"][f"link/{cap}"]) for cap in ("cap_a", "cap_b"))
     assert np.abs(a + b).max() <= 1e-8 * np.abs(a).max()
     assert a[1] > 30.0  # about 34 N, the pull stiffens the rubber (2.8 N for 3 mm)
+
+
+#: a unit bar of linear material on rollers (xmin, ymin, zmin) stretched by D along x, free
+#: lateral faces: sigma_xx = E D / L, the reaction on xmax is E D A / L; default solver options
+BAR_E, BAR_D = 1.0e9, 1.0e-3
+BAR = textwrap.dedent(f"""\
+    name: bar
+    kinematics: small
+    bodies:
+      b:
+        geometry: {{builder: box, min: [0, 0, 0], max: [1, 1, 1]}}
+        material: {{model: linear_elastic, E: {BAR_E!r}, nu: 0.3}}
+        grid: {{h0: 0.3, offset: [0.13, 0.29, 0.41]}}
+    boundary:
+      - {{body: b, patches: [xmin], type: displacement, components: {{x: 0}}}}
+      - {{body: b, patches: [ymin], type: displacement, components: {{y: 0}}}}
+      - {{body: b, patches: [zmin], type: displacement, components: {{z: 0}}}}
+      - {{body: b, patches: [xmax], type: displacement, components: {{x: {BAR_D!r}}}}}
+    """)
+
+
+def test_outer_loop_runs_to_its_tolerance_with_default_settings(tmp_path):
+    """With 4 outer passes (the old default) the last change was 1.7e-4 and the reaction off
+    by 1.0e-5; run to outer_tol = 1e-6 (6 passes, change 5.5e-7) it is off by 3.3e-8."""
+    out = tmp_path / "out"
+    assert main(["run", _write(tmp_path, BAR), "--level", "0", "--surface", "nurbs_fe", "--out", str(out),
+                 "--quiet"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    step = summary["steps"][-1]
+    assert summary["status"] == "converged" and step["outer_converged"] is True
+    assert step["outer_changes"][-1] <= 1e-6 < step["outer_changes"][-2]
+    reaction = np.array(step["reactions"]["b/xmax"])
+    exact = BAR_E * BAR_D          # sigma_xx times the unit area
+    assert abs(reaction[0] - exact) <= 1e-7 * exact
+    assert np.abs(reaction[1:]).max() <= 1e-7 * exact
+
+
+def test_outer_loop_cap_is_reported_not_hidden(tmp_path, capsys):
+    case = BAR + "solver: {outer_passes: 1, outer_tol: 1.0e-12}\n"
+    out = tmp_path / "out"
+    code = main(["run", _write(tmp_path, case), "--level", "0", "--surface", "nurbs_fe", "--out", str(out)])
+    assert code == 1
+    err = capsys.readouterr().err
+    warnings = [line for line in err.splitlines() if "warning:" in line]
+    assert len(warnings) == 1 and "outer_passes = 1" in warnings[0] and "outer_tol" in warnings[0]
+    summary = json.loads((out / "summary.json").read_text())
+    step = summary["steps"][-1]
+    assert step["outer_converged"] is False and step["outer_passes"] == 1
+    assert step["outer_changes"] == [1.0]          # the first recovery against none
+    assert summary["status"] == "outer_not_converged" and "outer_passes" in summary["message"]
+    assert "outer_not_converged" in err.splitlines()[-1]
+
+
+def test_surface_file_holds_the_boundary_rule_points(tmp_path):
+    """surface_001.vtu: one vertex per boundary-rule point of the body, the displacement
+    there equals the step's nodal field interpolated (and, in this patch test, the exact
+    linear field), the stress is the uniform one, and each point carries its patch."""
+    from cgfem.run import build_models
+    from elasticity_cases import uniform_stress_case
+
+    sigma = np.array([[3.0, 1.0, 0.5], [1.0, -2.0, 0.3], [0.5, 0.3, 1.0]]) * 1e6
+    case, eps = uniform_stress_case(sigma, 2.0e9, 0.3, (0.37, 0.61, 0.18))
+    from cgfem.run import run_case
+
+    assert run_case(case, 0, "nurbs_fe", tmp_path).status == "converged"
+    cloud = meshio.read(tmp_path / "surface_001.vtu")
+    step = meshio.read(tmp_path / "step_001.vtu")
+    model = build_models(case, 0, "nurbs_fe", lambda m: None)[0][0]
+    boundary = model.boundary_points
+    assert cloud.points.shape[0] == boundary.points.w.size == model.embedding.boundary.w.size
+    assert [c.type for c in cloud.cells] == ["vertex"]
+    assert np.array_equal(cloud.cells[0].data.ravel(), np.arange(cloud.points.shape[0]))
+    assert np.array_equal(cloud.points, boundary.points.x)
+    u = cloud.point_data["displacement"]
+    interpolated = boundary.values(model.space, step.point_data["displacement"].ravel())
+    assert np.abs(u - interpolated).max() <= 1e-15 * np.abs(interpolated).max()
+    assert np.abs(u - cloud.points @ eps.T).max() <= 1e-8 * np.abs(u).max()
+    assert np.abs(cloud.point_data["stress"] - sigma.ravel()).max() <= 1e-8 * np.abs(sigma).max()
+    s = sigma - np.trace(sigma) / 3 * np.eye(3)
+    assert np.allclose(cloud.point_data["von_mises"], np.sqrt(1.5 * np.sum(s * s)), rtol=1e-8)
+    assert np.all(cloud.point_data["body"] == 0)
+    names = model.embedding.patch_names
+    for index, name in enumerate(names):          # box patches: xmin ... zmax
+        on = cloud.point_data["patch"] == index
+        axis, side = "xyz".index(name[0]), float(name[1:] == "max")
+        assert on.any() and np.abs(cloud.points[on, axis] - side).max() < 1e-12

@@ -8,9 +8,11 @@ of the quadrature of the surface definition ``S``. Exit codes: 0 success, 2 bad 
 line on stderr naming the offending field, no traceback).
 
 ``cgfem run CASE.yaml --level L --surface S --out DIR`` solves the case and writes
-``DIR/summary.json`` and ``DIR/step_NNN.vtu`` (:mod:`cgfem.run`), with a progress line per
-Newton iteration and per step on stderr. Exit codes: 0 converged, 1 failed to converge (the
-converged steps are written), 2 bad input.
+``DIR/summary.json``, ``DIR/step_NNN.vtu`` and ``DIR/surface_NNN.vtu`` (:mod:`cgfem.run`),
+with a progress line per Newton iteration and per step on stderr. Exit codes: 0 converged
+(status ``converged``), 1 not converged (status ``failed``: Newton failed, the converged
+steps are written; or ``outer_not_converged``: every step solved but the outer loop of at
+least one stopped at ``solver.outer_passes`` above ``solver.outer_tol``), 2 bad input.
 """
 
 from __future__ import annotations
@@ -29,8 +31,11 @@ EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
 
-
-
+#: what ``--surface`` selects today (contact, which it is named for, is not in yet)
+SURFACE_HELP = ("contact surface definition: facets (marching-cubes triangles), nurbs_fe (exact "
+                "NURBS + FE displacement) or nurbs_fit (fitted NURBS); without contact it picks "
+                "the boundary quadrature: on the facets for facets, on the exact NURBS surface "
+                "for nurbs_fe and nurbs_fit")
 
 @dataclass(frozen=True)
 class GridReport:
@@ -138,7 +143,9 @@ def _cmd_check(args: argparse.Namespace) -> int:
         raise InputError("--level", f"must be >= 0, got {args.level}")
     if args.vtu is not None and args.level is None:
         raise InputError("--vtu", "needs --level")
-    reports = check_case(args.case, args.level, args.surface, args.vtu)
+    if args.surface is not None and args.level is None:
+        raise InputError("--surface", "needs --level (the surface definition only matters to the embedding)")
+    reports = check_case(args.case, args.level, args.surface or "nurbs_fe", args.vtu)
     if args.json:
         print(json.dumps({"bodies": {r.name: r.as_dict() for r in reports}}, indent=2))
     else:
@@ -152,6 +159,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     from cgfem.case.load import load_case
     from cgfem.run import run_case
+    from cgfem.solve.static import CONVERGED
 
     case = load_case(args.case)
     start = time.perf_counter()
@@ -175,7 +183,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     finally:
         signal.signal(signal.SIGINT, previous)
     log(f"{status.status}: {status.summary}" + (f" ({status.message})" if status.message else ""))
-    return EXIT_OK if status.status == "converged" else EXIT_FAILED
+    return EXIT_OK if status.status == CONVERGED else EXIT_FAILED
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -188,17 +196,18 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--json", action="store_true", help="print JSON instead of a table")
     check.add_argument("--level", type=int, default=None,
                        help="embed the bodies in their grids of this level (h = h0 / 2^level)")
-    check.add_argument("--surface", choices=sorted(SURFACES), default="nurbs_fe",
-                       help="surface definition of the quadrature (default nurbs_fe)")
+    check.add_argument("--surface", choices=sorted(SURFACES), default=None,
+                       help=f"with --level: {SURFACE_HELP} (default nurbs_fe)")
     check.add_argument("--vtu", default=None, metavar="DIR",
                        help="write the grid and the quadrature points as VTU files to DIR")
     check.set_defaults(func=_cmd_check)
-    run = sub.add_parser("run", help="solve a case and write summary.json and step_NNN.vtu")
+    run = sub.add_parser("run", help="solve a case and write summary.json, step_NNN.vtu and "
+                         "surface_NNN.vtu")
     run.add_argument("case", help="case file (YAML)")
     run.add_argument("--level", type=int, required=True, help="mesh level (h = h0 / 2^level)")
-    run.add_argument("--surface", choices=sorted(SURFACES), required=True,
-                     help="contact surface definition")
-    run.add_argument("--out", required=True, metavar="DIR", help="result folder")
+    run.add_argument("--surface", choices=sorted(SURFACES), required=True, help=SURFACE_HELP)
+    run.add_argument("--out", required=True, metavar="DIR",
+                     help="result folder (created when the run starts; must not be a file)")
     run.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     run.set_defaults(func=_cmd_run)
     return parser

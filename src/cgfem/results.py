@@ -1,4 +1,5 @@
-"""Result files of a run: ``summary.json`` and ``step_NNN.vtu`` (DESIGN.md contracts).
+"""Result files of a run: ``summary.json``, ``step_NNN.vtu`` and ``surface_NNN.vtu``
+(DESIGN.md contracts; README "Result files" lists every field).
 
 Every file is written to a hidden temporary name next to its target, flushed, then renamed
 onto it, so a reader never sees a partial file. ``summary.json`` is written last: a folder
@@ -14,7 +15,7 @@ import meshio
 import numpy as np
 
 from cgfem.atomic import write_text_atomic
-from cgfem.embedding.export import write_vtu_files
+from cgfem.embedding.export import _point_cloud as point_cloud, write_vtu_files
 
 
 def write_json_atomic(path: Path, data: dict) -> Path:
@@ -33,7 +34,7 @@ def _jsonable(value):
 def clear_previous(folder: Path) -> None:
     """Remove the summary and step files an earlier run left in ``folder``."""
     folder = Path(folder)
-    for pattern in ("summary.json", "step_*.vtu", "contact_*.vtu"):
+    for pattern in ("summary.json", "step_*.vtu", "surface_*.vtu", "contact_*.vtu"):
         for old in folder.glob(pattern):
             old.unlink()
 
@@ -41,9 +42,9 @@ def clear_previous(folder: Path) -> None:
 def step_mesh(bodies: list[dict]) -> meshio.Mesh:
     """One hexahedral mesh holding the active elements of every body.
 
-    ``bodies``: dicts with node ``points`` (n, 3), H8 ``cells`` (m, 8), nodal ``displacement`` (n, 3),
-    nodal ``stress`` (n, 3, 3, Cauchy, recovered), nodal ``von_mises`` (n,), per-element
-    ``status`` (m,) and ``element_von_mises`` (m,).
+    ``bodies``: dicts with node ``points`` (n, 3), H8 ``cells`` (m, 8), nodal ``displacement``
+    (n, 3), nodal ``stress`` (n, 3, 3, recovered Cauchy), nodal ``von_mises_nodal`` (n,),
+    per-element ``status`` (m,) and ``von_mises_max_qp`` (m,).
     """
     points, cells, point_data, cell_data = [], [], {}, {}
     shift = 0
@@ -54,9 +55,9 @@ def step_mesh(bodies: list[dict]) -> meshio.Mesh:
         shift += x.shape[0]
         _append(point_data, "displacement", b["displacement"])
         _append(point_data, "stress", b["stress"].reshape(-1, 9))
-        _append(point_data, "von_mises", b["von_mises"])
+        _append(point_data, "von_mises_nodal", b["von_mises_nodal"])
         _append(cell_data, "status", b["status"].astype(np.int32))
-        _append(cell_data, "element_von_mises", b["element_von_mises"])
+        _append(cell_data, "von_mises_max_qp", b["von_mises_max_qp"])
         _append(cell_data, "body", np.full(c.shape[0], index, np.int32))
     mesh = meshio.Mesh(np.concatenate(points), [("hexahedron", np.concatenate(cells))],
                        point_data={k: np.concatenate(v) for k, v in point_data.items()},
@@ -64,11 +65,34 @@ def step_mesh(bodies: list[dict]) -> meshio.Mesh:
     return mesh
 
 
+def surface_mesh(bodies: list[dict]) -> meshio.Mesh:
+    """The boundary-rule points of every body as VTK vertex cells (a point cloud at the
+    reference positions: warp by ``displacement`` for the deformed shape).
+
+    ``bodies``: dicts whose ``surface`` holds ``points`` (n, 3), ``displacement`` (n, 3),
+    ``stress`` (n, 3, 3, recovered Cauchy), ``von_mises`` (n,) and ``patch`` (n,) (index
+    into the body's patch names); the point data adds ``body`` (n,), the body's index.
+    """
+    x, point_data = [], {}
+    for index, b in enumerate(bodies):
+        s = b["surface"]
+        x.append(np.asarray(s["points"], float).reshape(-1, 3))
+        _append(point_data, "displacement", s["displacement"])
+        _append(point_data, "stress", np.asarray(s["stress"]).reshape(-1, 9))
+        _append(point_data, "von_mises", s["von_mises"])
+        _append(point_data, "body", np.full(x[-1].shape[0], index, np.int32))
+        _append(point_data, "patch", np.asarray(s["patch"], np.int32))
+    return point_cloud(np.concatenate(x), {k: np.concatenate(v) for k, v in point_data.items()})
+
+
 def _append(store: dict, key: str, value: np.ndarray) -> None:
     store.setdefault(key, []).append(np.asarray(value))
 
 
-def write_step(folder: Path, number: int, bodies: list[dict]) -> Path:
-    target = Path(folder) / f"step_{number:03d}.vtu"
-    write_vtu_files({target: step_mesh(bodies)})
-    return target
+def write_step(folder: Path, number: int, bodies: list[dict]) -> tuple[Path, Path]:
+    """Write ``step_NNN.vtu`` (:func:`step_mesh`) and ``surface_NNN.vtu``
+    (:func:`surface_mesh`) into ``folder``, atomically and together."""
+    folder = Path(folder)
+    step, surface = folder / f"step_{number:03d}.vtu", folder / f"surface_{number:03d}.vtu"
+    write_vtu_files({step: step_mesh(bodies), surface: surface_mesh(bodies)})
+    return step, surface

@@ -39,7 +39,7 @@ BYTES_PER_CUT_ELEMENT = 180_000
 
 @dataclass(frozen=True)
 class RunStatus:
-    status: str            # converged | failed
+    status: str            # converged | outer_not_converged | failed
     summary: Path
     message: str = ""
 
@@ -123,8 +123,16 @@ def build_models(case: Case, level: int, surface: str, log: Callable[[str], None
 
 
 def step_outputs(model: BodyModel, u: np.ndarray, recovered: np.ndarray) -> dict:
-    """Nodal fields for the VTU file and scalars for the summary of one body at one step;
-    ``recovered`` is the solver's recovery of ``u`` (the Cauchy stress in small strain)."""
+    """Fields for the step files and scalars for the summary of one body at one step;
+    ``recovered`` is the solver's recovery of ``u`` (the Cauchy stress in small strain).
+
+    The recovered Cauchy stress ``sigma*`` is nodal (SPR; in finite strain SPR of the Cauchy
+    stress at the sampling points). ``von_mises_nodal`` is its von Mises stress at the grid
+    nodes, some of which lie outside the body (extrapolated values); ``von_mises_max_qp``
+    (per element) and ``max_von_mises`` (the body's maximum) are maxima of the von Mises
+    stress of ``sigma*`` interpolated at material points only: the volume-rule points of
+    inside elements and every boundary-rule point. ``surface`` holds the boundary-rule
+    points with ``displacement``, ``stress`` and ``von_mises`` interpolated there."""
     space, el = model.space, model.elasticity
     nodal_cauchy = (spr.recover(model.recovery, model.cauchy(u, model.sampling_points()))
                     if model.finite else recovered)
@@ -137,22 +145,63 @@ def step_outputs(model: BodyModel, u: np.ndarray, recovered: np.ndarray) -> dict
     # elements may lie in the void) and every point of the boundary rule
     inner = ~space.cut[vol.element]
     boundary = model.boundary_points
-    vm_boundary = von_mises(boundary.interpolate(space, nodal_cauchy))
+    stress_boundary = boundary.interpolate(space, nodal_cauchy)
+    vm_boundary = von_mises(stress_boundary)
     per_element = np.zeros(space.n_elements)
     np.maximum.at(per_element, vol.element[inner], vm_points[inner])
     np.maximum.at(per_element, boundary.slots, vm_boundary)
     eta, _ = zz_estimate(space, vol, sigma_h, at_points, el.mu, el.lam)
     norm = energy_norm(vol, sigma_h, el.mu, el.lam)
     status = np.where(space.cut, 2, 1)
+    surface = {"points": boundary.points.x, "displacement": boundary.values(space, u),
+               "stress": stress_boundary, "von_mises": vm_boundary, "patch": boundary_patch(model)}
     return {"points": space.coordinates, "cells": space.connectivity, "displacement": u.reshape(-1, 3),
-            "stress": nodal_cauchy, "von_mises": vm_nodes, "status": status,
-            "element_von_mises": per_element, "max_von_mises": float(per_element.max(initial=0.0)),
+            "stress": nodal_cauchy, "von_mises_nodal": vm_nodes, "status": status,
+            "von_mises_max_qp": per_element, "max_von_mises": float(per_element.max(initial=0.0)),
+            "von_mises_max_nodal": float(vm_nodes.max(initial=0.0)), "surface": surface,
             "error_estimate": float(eta), "energy_norm": float(norm)}
+
+
+def boundary_patch(model: BodyModel) -> np.ndarray:
+    """Patch index (into ``model.embedding.patch_names``) of every boundary-rule point
+    (n,), in the order of ``model.boundary_points``."""
+    points = model.boundary_points
+    patch = getattr(points, "patch", None)
+    if patch is None:   # BoundaryPoints groups the rule by element with a stable sort
+        surface = model.embedding.boundary
+        patch = surface.patch[np.argsort(model.space.slot(surface.element), kind="stable")]
+    return np.asarray(patch, np.int32)
+
+
+def check_out(out: Path) -> list[Path]:
+    """Refuse an output folder ``out`` that cannot be one (a file, or under a file); returns
+    the folders that do not exist yet, outermost first (the run creates them)."""
+    missing, folder = [], Path(out)
+    while not folder.exists():
+        if folder == folder.parent:
+            break
+        missing.append(folder)
+        folder = folder.parent
+    if not folder.is_dir():
+        where = "is" if folder == Path(out) else f"is under {folder}, which is"
+        raise InputError("--out", f"{out} {where} a file, not a folder")
+    return missing[::-1]
+
+
+def _remove_created(created: list[Path]) -> None:
+    """Remove the folders this run created (innermost first) while they are empty."""
+    for folder in reversed(created):
+        try:
+            folder.rmdir()
+        except OSError:
+            return
 
 
 def run_case(case: Case, level: int, surface: str, out: Path,
              log: Callable[[str], None] = lambda m: None) -> RunStatus:
-    """Solve ``case`` and write its results to ``out``; returns the run status."""
+    """Solve ``case`` and write its results to ``out``; returns the run status
+    (``converged``, ``outer_not_converged`` or ``failed``, see :mod:`cgfem.solve.static`).
+    Bad input raises :class:`InputError` and leaves no folder this call created."""
     if level < 0:
         raise InputError("--level", f"must be >= 0, got {level}")
     if surface not in SURFACES:
@@ -160,34 +209,24 @@ def run_case(case: Case, level: int, surface: str, out: Path,
     if case.solver.linear != "auto" and case.solver.linear not in available_backends():
         raise InputError("solver.linear", f"backend {case.solver.linear!r} is not available here "
                          f"(available: {', '.join(available_backends())})")
-    started = time.perf_counter()
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    clear_previous(out)
-    models, measures = build_models(case, level, surface, log)
-    built = time.perf_counter()
-    system = System(models)
-    steps: list[dict] = []
-
-    def on_step(record: StepRecord) -> None:
-        outputs = [step_outputs(m, u, s) for m, u, s in zip(models, record.u, record.recovered)]
-        write_step(out, len(steps) + 1, outputs)
-        reactions = {}
-        for m, u, s in zip(models, record.u, record.stress):
-            reactions.update({k: v.tolist() for k, v in m.reactions(u, record.load_factor, s).items()})
-        steps.append({"load_factor": record.load_factor, "newton_residuals": record.newton_residuals[0],
-                      "pass_residuals": record.newton_residuals,
-                      "outer_passes": record.outer_passes, "outer_changes": record.outer_changes,
-                      "reactions": reactions,
-                      "contact": {"force": [0.0, 0.0, 0.0], "active_points": 0, "max_pressure": 0.0},
-                      "max_von_mises": {m.name: o["max_von_mises"] for m, o in zip(models, outputs)},
-                      "error_estimate": {m.name: o["error_estimate"] for m, o in zip(models, outputs)},
-                      "energy_norm": {m.name: o["energy_norm"] for m, o in zip(models, outputs)},
-                      "seconds": record.seconds})
-        log(f"step {len(steps)} converged at load factor {record.load_factor:.4g} "
-            f"({record.outer_passes} outer passes, {record.seconds:.2f} s)")
-
-    result = solve_static(system, case.steps, case.solver, log, on_step)
+    created = check_out(out)
+    started = time.perf_counter()
+    try:
+        models, measures = build_models(case, level, surface, log)
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise InputError("--out", f"cannot create {out}: {err.strerror or err}") from None
+        clear_previous(out)
+        built = time.perf_counter()
+        steps: list[dict] = []
+        result = solve_static(System(models), case.steps, case.solver, log,
+                              lambda record: steps.append(_write_step(out, models, record, len(steps) + 1,
+                                                                      log)))
+    except InputError:
+        _remove_created(created)
+        raise
     summary = {"case": case.name, "level": level, "surface": surface, "status": result.status,
                "message": result.message, "kinematics": case.kinematics, "bodies": measures,
                "steps": steps,
@@ -196,3 +235,29 @@ def run_case(case: Case, level: int, surface: str, out: Path,
                             "numpy": np.__version__}}
     path = write_json_atomic(out / "summary.json", summary)
     return RunStatus(result.status, path, result.message)
+
+
+def _write_step(out: Path, models: list[BodyModel], record: StepRecord, number: int,
+                log: Callable[[str], None]) -> dict:
+    """Write the files of step ``number`` and return its entry of ``summary.json``."""
+    outputs = [step_outputs(m, u, s) for m, u, s in zip(models, record.u, record.recovered)]
+    write_step(out, number, outputs)
+    reactions = {}
+    for m, u, s in zip(models, record.u, record.frozen_stress):
+        reactions.update({k: v.tolist() for k, v in m.reactions(u, record.load_factor, s).items()})
+    names = [m.name for m in models]
+    entry = {"load_factor": record.load_factor, "newton_residuals": record.newton_residuals[0],
+             "pass_residuals": record.newton_residuals,
+             "outer_passes": record.outer_passes, "outer_changes": record.outer_changes,
+             "outer_converged": record.outer_converged,
+             "reactions": reactions,
+             "contact": {"force": [0.0, 0.0, 0.0], "active_points": 0, "max_pressure": 0.0},
+             "max_von_mises": {n: o["max_von_mises"] for n, o in zip(names, outputs)},
+             "von_mises_max_nodal": {n: o["von_mises_max_nodal"] for n, o in zip(names, outputs)},
+             "error_estimate": {n: o["error_estimate"] for n, o in zip(names, outputs)},
+             "energy_norm": {n: o["energy_norm"] for n, o in zip(names, outputs)},
+             "seconds": record.seconds}
+    outer = "" if record.outer_converged else ", outer loop NOT converged"
+    log(f"step {number} converged at load factor {record.load_factor:.4g} "
+        f"({record.outer_passes} outer passes{outer}, {record.seconds:.2f} s)")
+    return entry

@@ -49,7 +49,7 @@ class BodyModel:
         the weak-Dirichlet and ghost-penalty parameters. In small strain every material is
         its linearization (linear elastic with the same E and nu)."""
         space = Space.from_embedding(embedding)
-        lam, mu = body.material.lame()
+        lam, mu = body.material.lame()          # Lame(lam, mu)
         model = model_id(body.material.model) if finite else LINEAR_ELASTIC
         G, extra = ghost_penalty(space, options.ghost_penalty, lam + 2.0 * mu)
         pattern = build_pattern(space, extra)
@@ -79,9 +79,11 @@ class BodyModel:
     def finite(self) -> bool:
         return self.elasticity.model == NEO_HOOKEAN
 
-    def assemble(self, u: np.ndarray, t: float, stress: np.ndarray | None,
+    def assemble(self, u: np.ndarray, t: float, frozen_stress: np.ndarray | None,
                  tangent: bool = True) -> tuple[np.ndarray, sp.csr_matrix | None]:
-        """Residual ``r(u) = f_int - f_ext`` (n_dofs,) and, if asked, its tangent (CSR)."""
+        """Residual ``r(u) = f_int - f_ext`` (n_dofs,) and, if asked, its tangent (CSR), at
+        load factor ``t`` with the recovered stress held at ``frozen_stress`` (n_nodes, 3, 3)
+        (None: no recovery yet, the weak Dirichlet terms are pure penalties)."""
         r = -t * self.load
         data = self.pattern.zeros() if tangent else None
         self.elasticity.add(u, r, data)
@@ -90,7 +92,7 @@ class BodyModel:
             if data is not None:
                 data[self._ghost_positions()] += self.ghost.data
         for term in self.dirichlet:
-            term.add(u, t, stress, r, data)
+            term.add(u, t, frozen_stress, r, data)
         return r, (self.pattern.matrix(data) if data is not None else None)
 
     def _ghost_positions(self) -> np.ndarray:
@@ -119,8 +121,11 @@ class BodyModel:
             self._boundary = BoundaryPoints.of(self.space, surface, np.ones(surface.w.size, bool))
         return self._boundary
 
-    def reactions(self, u: np.ndarray, t: float, stress: np.ndarray | None) -> dict[str, np.ndarray]:
-        return {d.label: d.reaction(u, t, stress) for d in self.dirichlet}
+    def reactions(self, u: np.ndarray, t: float, frozen_stress: np.ndarray | None
+                  ) -> dict[str, np.ndarray]:
+        """Force (3,) of every weak Dirichlet support on the body, by label, at ``u`` with
+        the recovered stress the solve held frozen (``StepRecord.frozen_stress``)."""
+        return {d.label: d.reaction(u, t, frozen_stress) for d in self.dirichlet}
 
     def cauchy(self, u: np.ndarray, points: ElementPoints | None = None) -> np.ndarray:
         """Cauchy stress (n, 3, 3) at ``points`` (default: the volume rule)."""

@@ -101,23 +101,25 @@ class WeakDirichlet:
             target[:, i] = expr(x[:, 0], x[:, 1], x[:, 2])
         return cls(label, space, pattern, boundary, mask, target, beta)
 
-    def multiplier(self, u: np.ndarray, t: float, stress: np.ndarray | None) -> np.ndarray:
-        """``lambda`` (n, 3) at the points (zero on free components)."""
+    def multiplier(self, u: np.ndarray, t: float, frozen_stress: np.ndarray | None) -> np.ndarray:
+        """``lambda`` (n, 3) at the points (zero on free components), with ``P*`` the frozen
+        recovered stress ``frozen_stress`` (n_nodes, 3, 3; None: penalty only)."""
         lam = self.beta * (t * self.target - self.boundary.values(self.space, u))
-        if stress is not None:
-            lam += self.boundary.traction_of(self.space, stress)
+        if frozen_stress is not None:
+            lam += self.boundary.traction_of(self.space, frozen_stress)
         return lam * self.components
 
-    def add(self, u: np.ndarray, t: float, stress: np.ndarray | None, r: np.ndarray,
+    def add(self, u: np.ndarray, t: float, frozen_stress: np.ndarray | None, r: np.ndarray,
             data: np.ndarray | None) -> None:
-        self.boundary.integrate(self.space, -self.multiplier(u, t, stress), r)
+        """``r -= int lambda . v dA`` and, if ``data`` is given, the tangent ``beta M_c``."""
+        self.boundary.integrate(self.space, -self.multiplier(u, t, frozen_stress), r)
         if data is not None:
             pos, val = self._penalty_entries()
             data[pos] += val
 
-    def reaction(self, u: np.ndarray, t: float, stress: np.ndarray | None) -> np.ndarray:
+    def reaction(self, u: np.ndarray, t: float, frozen_stress: np.ndarray | None) -> np.ndarray:
         """Force (3,) the support exerts on the body: ``int lambda dA``."""
-        return self.boundary.points.w @ self.multiplier(u, t, stress)
+        return self.boundary.points.w @ self.multiplier(u, t, frozen_stress)
 
     def _penalty_entries(self) -> tuple[np.ndarray, np.ndarray]:
         if self._penalty is None:

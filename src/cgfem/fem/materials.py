@@ -1,4 +1,4 @@
-"""Constitutive laws at material points: Lamé parameters in kernel order, model ids, batched stress
+"""Constitutive laws at material points: Lamé parameters, model ids, batched stress
 evaluation and the closed-form uniaxial Neo-Hookean reference.
 
 The laws themselves are the numba kernels of :mod:`cgfem.fem._material_kernels`
@@ -13,7 +13,7 @@ import math
 import numpy as np
 from scipy.optimize import brentq
 
-from cgfem.case.model import Material
+from cgfem.case.model import Lame, Material
 from cgfem.errors import InputError
 from cgfem.fem import _material_kernels as _k
 from cgfem.fem._material_kernels import LINEAR_ELASTIC, NEO_HOOKEAN, stress_tangent
@@ -21,6 +21,7 @@ from cgfem.fem._material_kernels import LINEAR_ELASTIC, NEO_HOOKEAN, stress_tang
 __all__ = [
     "LINEAR_ELASTIC",
     "NEO_HOOKEAN",
+    "Lame",
     "MODEL_IDS",
     "lame",
     "model_id",
@@ -35,11 +36,11 @@ __all__ = [
 MODEL_IDS: dict[str, int] = {"linear_elastic": LINEAR_ELASTIC, "neo_hookean": NEO_HOOKEAN}
 
 
-def lame(E: float, nu: float) -> tuple[float, float]:
-    """Lamé parameters ``(mu, lam)`` (the kernels' argument order) of ``E`` and ``nu``,
-    validated like a case file's material (:meth:`cgfem.case.model.Material.lame`)."""
-    lam, mu = Material("linear_elastic", E, nu).lame()
-    return mu, lam
+def lame(E: float, nu: float) -> Lame:
+    """Lamé parameters ``Lame(lam, mu)`` of ``E`` and ``nu`` (the order of
+    :meth:`cgfem.case.model.Material.lame`, validated like a case file's material). The
+    kernels below take ``mu, lam``: pass them by name."""
+    return Material("linear_elastic", E, nu).lame()
 
 
 def model_id(name: str) -> int:
@@ -119,7 +120,7 @@ def uniaxial_stretch_neo_hookean(stretch: float, E: float, nu: float) -> tuple[f
     s = float(stretch)
     if not (math.isfinite(s) and s > 0.0):
         raise InputError("stretch", f"must be a finite number > 0, got {stretch!r}")
-    mu, lam = lame(E, nu)
+    lam, mu = lame(E, nu)
     if s == 1.0:
         return 1.0, 0.0
     ln_s = math.log(s)

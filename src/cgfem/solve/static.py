@@ -1,13 +1,15 @@
 """Quasi-static solution: load steps, the outer recovered-stress loop, Newton, cut-back.
 
 For each load step the load factor ``t`` goes up by ``1 / steps``. Inside a step the outer
-loop freezes the recovered stress ``P*`` of every body (used by the weak Dirichlet
-conditions, later by contact), solves the nonlinear problem by Newton, recovers ``P*``
-from the new displacement and repeats until ``P*`` changes by less than ``outer_tol``
-(relative, in the Frobenius norm over all nodes) or ``outer_passes`` are used. When Newton
-fails, the increment is halved (at most ``max_cutbacks`` times per step) and the step is
-reached in several sub-steps; if it still fails, the run stops with status ``failed`` and
-keeps every converged step.
+loop freezes the recovered stress ``P*`` of every body (the *frozen stress*, used by the
+weak Dirichlet conditions, later by contact), solves the nonlinear problem by Newton,
+recovers ``P*`` from the new displacement and repeats until ``P*`` changes by less than
+``outer_tol`` (relative, in the Frobenius norm over all nodes). ``outer_passes`` is only a
+cap: a step that reaches it above ``outer_tol`` is kept but marked
+``outer_converged = False`` (and the run's status says so, see :class:`StaticResult`).
+When Newton fails, the increment is halved (at most ``max_cutbacks`` times per step) and
+the step is reached in several sub-steps; if it still fails, the run stops with status
+``failed`` and keeps every converged step.
 """
 
 from __future__ import annotations
@@ -25,25 +27,54 @@ from cgfem.solve.linear import choose_backend, factorize, rigid_body_modes
 from cgfem.solve.newton import newton
 
 
+#: run statuses: every step converged with its outer loop below ``outer_tol``; every step
+#: converged but at least one outer loop stopped at the ``outer_passes`` cap; Newton failed
+CONVERGED, OUTER_NOT_CONVERGED, FAILED = "converged", "outer_not_converged", "failed"
+
+
 @dataclass
 class StepRecord:
-    """One converged (sub)step."""
+    """One converged (sub)step.
+
+    frozen_stress : per body, the nodal recovered stress (n_nodes, 3, 3) the last Newton
+        solve held frozen (None before any recovery); reactions are in equilibrium with it
+    recovered : per body, the nodal stress (n_nodes, 3, 3) recovered from the converged ``u``
+    outer_converged : the last change of the recovered stress was <= ``outer_tol`` (False:
+        the loop stopped at the ``outer_passes`` cap)
+    """
 
     load_factor: float
     newton_residuals: list[list[float]]   # residual norms of every Newton solve, one per pass
     outer_passes: int
     outer_changes: list[float]
+    outer_converged: bool
     u: list[np.ndarray] = field(repr=False)
-    stress: list[np.ndarray | None] = field(repr=False)     # the recovered stress the last solve used
-    recovered: list[np.ndarray] = field(repr=False)         # recovered from the converged u
+    frozen_stress: list[np.ndarray | None] = field(repr=False)
+    recovered: list[np.ndarray] = field(repr=False)
     seconds: float = 0.0
 
 
 @dataclass
 class StaticResult:
-    status: str                     # "converged" | "failed"
+    """Outcome of :func:`solve_static`: ``status`` is :data:`CONVERGED`,
+    :data:`OUTER_NOT_CONVERGED` (every step reached, some outer loop stopped at its cap;
+    ``message`` names the steps) or :data:`FAILED` (``message`` says where)."""
+
+    status: str
     steps: list[StepRecord]
     message: str = ""
+
+
+@dataclass(frozen=True)
+class Increment:
+    """The outer loop's result at one load factor (see :class:`StepRecord` for the fields)."""
+
+    u: np.ndarray                         # (n_dofs,) converged displacement
+    frozen_stress: list[np.ndarray | None]
+    recovered: list[np.ndarray]
+    newton_residuals: list[list[float]]
+    outer_changes: list[float]
+    outer_converged: bool
 
 
 class System:
@@ -65,10 +96,13 @@ class System:
     def split(self, u: np.ndarray) -> list[np.ndarray]:
         return [u[a:b] for a, b in zip(self.offsets[:-1], self.offsets[1:])]
 
-    def assemble(self, u: np.ndarray, t: float, stress: list[np.ndarray | None],
+    def assemble(self, u: np.ndarray, t: float, frozen_stress: list[np.ndarray | None],
                  tangent: bool) -> tuple[np.ndarray, sp.csr_matrix | None]:
+        """Residual (n_dofs,) at ``u`` and load factor ``t`` with every body's recovered
+        stress held at ``frozen_stress`` (one (n_nodes, 3, 3) array or None per body), and
+        the tangent if asked (CSR, block-diagonal over the bodies)."""
         parts = [b.assemble(ub, t, s, tangent and not (self.linear and self._K is not None))
-                 for b, ub, s in zip(self.bodies, self.split(u), stress)]
+                 for b, ub, s in zip(self.bodies, self.split(u), frozen_stress)]
         r = np.concatenate([p[0] for p in parts])
         if not tangent:
             return r, None
@@ -136,12 +170,14 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
     """Run the load steps; ``on_step`` is called after every converged (sub)step.
 
     A step whose increment fails is reached in sub-steps of half the size (a quarter after
-    a second failure, ...), at most ``options.max_cutbacks`` halvings per step."""
+    a second failure, ...), at most ``options.max_cutbacks`` halvings per step. A (sub)step
+    whose outer loop stops at ``options.outer_passes`` above ``options.outer_tol`` is kept,
+    logged with a ``warning:`` line and makes the status :data:`OUTER_NOT_CONVERGED`."""
     log = log or (lambda message: None)
     choose_backend(system.n_dofs, system.symmetric, options.linear)   # ValueError if unusable
     solver = _Solver(options.linear, system.near_null(), system.symmetric)
     u = np.zeros(system.n_dofs)
-    stress: list[np.ndarray | None] = [None] * len(system.bodies)
+    recovered: list[np.ndarray | None] = [None] * len(system.bodies)
     t, records = 0.0, []
     for step in range(1, steps + 1):
         target = step / steps
@@ -149,30 +185,43 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
         while t < target - 1e-12 * size:
             t_new = target if target - t <= size * (1.0 + 1e-9) else t + size
             start = time.perf_counter()
-            outcome = _solve_increment(system, solver, u, stress, t_new, options, log)
+            outcome = _solve_increment(system, solver, u, recovered, t_new, options, log)
             if outcome is None:
                 cutbacks += 1
                 if cutbacks > options.max_cutbacks:
-                    return StaticResult("failed", records, f"no convergence at load factor {t_new:.6g} "
+                    return StaticResult(FAILED, records, f"no convergence at load factor {t_new:.6g} "
                                         f"after {options.max_cutbacks} cut-backs")
                 size *= 0.5
                 log(f"cut-back {cutbacks}: load increment {size:.4g}")
                 continue
-            u, used, stress, residuals, changes = outcome
-            t = t_new
-            record = StepRecord(t, residuals, len(changes), changes, system.split(u.copy()),
-                                used, stress, time.perf_counter() - start)
+            u, recovered, t = outcome.u, outcome.recovered, t_new
+            if not outcome.outer_converged:
+                log(f"warning: t={t:.4g}: outer loop stopped at outer_passes = {options.outer_passes} "
+                    f"with the recovered stress still changing by {outcome.outer_changes[-1]:.3e} "
+                    f"> outer_tol = {options.outer_tol:.3e}")
+            record = StepRecord(t, outcome.newton_residuals, len(outcome.outer_changes),
+                                outcome.outer_changes, outcome.outer_converged,
+                                system.split(u.copy()), outcome.frozen_stress, recovered,
+                                time.perf_counter() - start)
             records.append(record)
             if on_step:
                 on_step(record)
-    return StaticResult("converged", records)
+    capped = [r.load_factor for r in records if not r.outer_converged]
+    if capped:
+        return StaticResult(OUTER_NOT_CONVERGED, records,
+                            f"outer loop stopped at outer_passes = {options.outer_passes} above "
+                            f"outer_tol = {options.outer_tol:.3g} at load factor(s) "
+                            f"{', '.join(f'{t:.6g}' for t in capped)}")
+    return StaticResult(CONVERGED, records)
 
 
-def _solve_increment(system: System, solver: _Solver, u0: np.ndarray, stress0: list, t: float,
-                     options: SolverOptions, log: Log):
-    """Outer loop at load factor ``t``: (u, stress used by the last solve, stress recovered
-    from u, Newton residuals per pass, stress changes per pass); None when Newton fails."""
-    u, stress = u0, list(stress0)
+def _solve_increment(system: System, solver: _Solver, u0: np.ndarray,
+                     recovered0: list[np.ndarray | None], t: float, options: SolverOptions,
+                     log: Log) -> Increment | None:
+    """Outer loop at load factor ``t`` from ``u0`` and the recovery ``recovered0`` of the
+    previous step, until the recovered stress changes by <= ``options.outer_tol`` or
+    ``options.outer_passes`` solves are done; None when Newton fails."""
+    u, frozen, recovered = u0, list(recovered0), list(recovered0)
     changes: list[float] = []
     residuals: list[list[float]] = []
     # the forces in play, which Newton's residual is measured against: the dead loads, the
@@ -181,17 +230,19 @@ def _solve_increment(system: System, solver: _Solver, u0: np.ndarray, stress0: l
     # internal forces.
     reference = max(system.load_norm(t), system.force_scale(u))
     for outer in range(1, options.outer_passes + 1):
-        def assemble(v, tangent, stress=stress):
-            return system.assemble(v, t, stress, tangent)
+        frozen = recovered
+
+        def assemble(v, tangent, frozen=frozen):
+            return system.assemble(v, t, frozen, tangent)
         # later passes start close to the solution: modified Newton on the last
         # factorization first, a full Newton solve if that does not converge quickly
         attempts = [True, False] if outer > 1 and not system.linear else [False]
-        for frozen in attempts:
-            solver.frozen = frozen
+        for fixed_tangent in attempts:
+            solver.frozen = fixed_tangent
             tic = time.perf_counter()
             result = newton(assemble, u, solver, tol=options.newton_tol, reference=reference,
-                            max_iter=MODIFIED_NEWTON_ITERATIONS if frozen else options.max_newton,
-                            fixed_tangent=frozen,
+                            max_iter=MODIFIED_NEWTON_ITERATIONS if fixed_tangent else options.max_newton,
+                            fixed_tangent=fixed_tangent,
                             log=lambda k, r: log(f"t={t:.4g} pass {outer} newton {k}: "
                                                  f"|r|/ref={r:.3e}  ({time.perf_counter() - tic:.2f} s)"))
             solver.frozen = False
@@ -203,11 +254,11 @@ def _solve_increment(system: System, solver: _Solver, u0: np.ndarray, stress0: l
         reference = result.reference
         u = result.u
         residuals.append(result.residuals)
-        used, stress = stress, system.recover(u)
-        changes.append(relative_change(stress, used))
+        recovered = system.recover(u)
+        changes.append(relative_change(recovered, frozen))
         log(f"t={t:.4g} pass {outer}: recovered stress changed by {changes[-1]:.3e}")
         if changes[-1] <= options.outer_tol:
             break
-    # reactions are in equilibrium with the stress the last solve used; the next step starts
-    # from the newest recovery
-    return u, used, stress, residuals, changes
+    # reactions are in equilibrium with the stress the last solve held frozen; the next step
+    # starts from the newest recovery
+    return Increment(u, frozen, recovered, residuals, changes, changes[-1] <= options.outer_tol)
