@@ -1,24 +1,28 @@
-# Regenerates the paper's figures. Today the pipeline validates every case, measures its exact
-# geometry and embeds every body at each level and surface definition; solving and plotting
-# join as the library grows.
-from snakemake.utils import validate
+# The replication pipeline: every example x level x surface definition is solved
+# (results/runs/{case}/L{level}_{surface}/), the planar runs are measured against a
+# body-fitted reference, and every figure (paper_figures/) and the claims table
+# (results/claims.md) are drawn from the result files.
+#   snakemake --cores 2                                   # full run
+#   snakemake --cores 2 --configfile config/smoke.yaml    # coarsest meshes, fewest steps
 
 
 configfile: "config/config.yaml"
 
 
-validate(config, "workflow/schemas/config.schema.yaml")
-
-
-include: "workflow/rules/check.smk"
+include: "workflow/rules/common.smk"
 
 
 rule all:
+    """Every final figure (PNG and PDF), the claims table and the checked cases."""
     input:
-        expand("results/check/{case}.json", case=config["cases"]),
-        expand(
-            "results/embedding/{case}_L{level}_{surface}.json",
-            case=config["cases"],
-            level=config["levels"],
-            surface=config["surfaces"],
-        ),
+        expand("paper_figures/{name}.{ext}", name=FIGURES, ext=["png", "pdf"]),
+        "results/claims.md",
+        expand("results/check/{case}.json", case=EXAMPLES),
+    default_target: True
+
+
+include: "workflow/rules/check.smk"
+include: "workflow/rules/run.smk"
+include: "workflow/rules/reference.smk"
+include: "workflow/rules/analyse.smk"
+include: "workflow/rules/figures.smk"

@@ -1,15 +1,11 @@
-wildcard_constraints:
-    case=r"[A-Za-z0-9_]+",
-    level=r"\d+",
-    surface=r"facets|nurbs_fe|nurbs_fit",
-
-
 rule check_case:
     """Validate a case and record the B-rep volume and patch areas of its bodies."""
     input:
-        "config/cases/{case}.yaml",
+        case_file,
     output:
         "results/check/{case}.json",
+    conda:
+        ENV
     log:
         "logs/check/{case}.log",
     shell:
@@ -19,11 +15,24 @@ rule check_case:
 rule check_embedding:
     """Embed every body of a case at one level: element counts and quadrature measures."""
     input:
-        "config/cases/{case}.yaml",
+        case_file,
     output:
         "results/embedding/{case}_L{level}_{surface}.json",
+    conda:
+        ENV
     log:
         "logs/embedding/{case}_L{level}_{surface}.log",
     shell:
         "cgfem check {input} --level {wildcards.level} --surface {wildcards.surface} --json "
         "> {output}.tmp 2> {log} && mv {output}.tmp {output}"
+
+
+rule embeddings:
+    """Every embedding of the configuration (not part of `all`: the runs embed again)."""
+    input:
+        [
+            f"results/embedding/{case}_L{level}_{surface}.json"
+            for case in EXAMPLES
+            for level in EXAMPLES[case]["levels"]
+            for surface in SURFACES
+        ],

@@ -87,9 +87,12 @@ def volume_strain(case: Case, run: Run, body_name: str, u: np.ndarray, nodes: np
 
 
 def energy_errors(case_file: str | Path, run_folder: str | Path, error: BodyError) -> list[ErrorRow]:
-    """Relative energy-norm error of every body of a run at its last step."""
+    """Relative energy-norm error of every body of a run at its last step (no rows for a run
+    without a converged step)."""
     case, run = load_case(case_file), Run.load(run_folder)
-    rows = []
+    rows: list[ErrorRow] = []
+    if run.n_steps == 0:
+        return rows
     for name, (u, nodes) in nodal_displacements(run).items():
         s = volume_strain(case, run, name, u, nodes)
         rows.append(ErrorRow(run.surface, run.level, name, run.dofs, float(run.body(name)["h"]),

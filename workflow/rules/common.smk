@@ -1,0 +1,60 @@
+# Configuration check and the helpers every rule file uses (no rules here).
+from snakemake.utils import validate
+
+
+validate(config, "../schemas/config.schema.yaml")
+
+EXAMPLES = config["examples"]
+SURFACES = config["surfaces"]
+RUN = "results/runs/{case}/L{level}_{surface}"
+#: software of every rule (relative to the rule files)
+ENV = "../envs/cgfem.yaml"
+
+
+wildcard_constraints:
+    case="|".join(EXAMPLES),
+    level=r"\d+",
+    surface="|".join(SURFACES),
+
+
+def case_file(wildcards):
+    """The case file of the example ``wildcards.case``."""
+    return EXAMPLES[wildcards.case]["case"]
+
+
+def run_folder(wildcards):
+    return RUN.format(**wildcards)
+
+
+def summaries(case, surfaces=None, levels=None):
+    """summary.json of every run of ``case`` (all configured levels and definitions, or the
+    given ones)."""
+    return expand(
+        f"{RUN}/summary.json",
+        case=case,
+        level=EXAMPLES[case]["levels"] if levels is None else levels,
+        surface=SURFACES if surfaces is None else surfaces,
+    )
+
+
+def all_summaries():
+    return [path for case in EXAMPLES for path in summaries(case)]
+
+
+def planar_error_tables():
+    return expand(
+        "results/analysis/planar/errors_L{level}_{surface}.csv",
+        level=EXAMPLES["planar"]["levels"],
+        surface=SURFACES,
+    )
+
+
+def fig15_summaries():
+    return [
+        f"results/runs/chain2_rubber/L{run['level']}_{run['surface']}/summary.json"
+        for run in config["figures"]["fig15"]["runs"]
+    ]
+
+
+#: final products: figure name -> (PNG, PDF)
+FIGURES = ["fig09", "fig10", "fig13", "fig14", "fig15", "fig17", "newton", "timings", "geometry"]

@@ -1,0 +1,13 @@
+"""The claims table of the paper, from the planar error tables and the chain runs."""
+import sys
+
+from cgfem.report.claims import claims, write_claims
+from cgfem.report.curves import AXES
+
+with open(snakemake.log[0], "w") as sys.stderr:
+    c, f = snakemake.params.claims, snakemake.params.fig13
+    write_claims(snakemake.output[0], claims(
+        snakemake.input.errors, snakemake.input.chain2, snakemake.input.chain3,
+        rate_tolerance=c["rate_tolerance"], reaction_level=c["reaction_level"],
+        pulled=f["pulled"], component=AXES[f.get("component", "y")],
+        von_mises_level=c["von_mises_level"], von_mises_body=c["von_mises_body"]))

@@ -1,0 +1,9 @@
+"""Energy-norm error of one planar run against the cached reference, as a CSV table."""
+import sys
+
+from cgfem.report.energy import energy_errors, reference_error, write_error_table
+
+with open(snakemake.log[0], "w") as sys.stderr:
+    error = reference_error(snakemake.input.reference)
+    write_error_table(energy_errors(snakemake.input.case, snakemake.input.summary, error),
+                      snakemake.output[0])
