@@ -20,7 +20,7 @@ from cgfem.report.claims import (claim_coarse_facets, claim_lower_reaction, clai
                                  claim_optimal_rate, claims, write_claims)
 from cgfem.report.convergence import fitted_rate
 from cgfem.report.curves import geometry_errors
-from cgfem.report.energy import ErrorRow, energy_errors, read_error_tables, write_error_table
+from cgfem.report.energy import TOTAL, ErrorRow, energy_errors, read_error_tables, write_error_table
 from cgfem.report.runs import Run, load_runs
 from cgfem.report.style import save_figure
 from cgfem.run import embed_body
@@ -108,7 +108,7 @@ def _error_rows(rate_of):
     for surface, p in rate_of.items():
         for level in range(4):
             h = 0.00125 / 2**level
-            for body, c in (("lower", 0.3), ("upper", 0.5)):
+            for body, c in (("lower", 0.3), ("upper", 0.4), (TOTAL, 0.5)):
                 rows.append(ErrorRow(surface, level, body, 600 * 8**level, h, c * (h / 0.00125) ** p))
     return rows
 
@@ -118,7 +118,8 @@ def test_fig09_draws_every_definition_with_its_fitted_rate(tmp_path):
     table = tmp_path / "errors.csv"
     write_error_table(_error_rows(rate_of), table)
     assert read_error_tables([table]) == _error_rows(rate_of)
-    fig = figure("fig09", [table])
+    assert len(figure("fig09", [table]).axes) == 1                 # the whole problem
+    fig = figure("fig09", [table], bodies=("lower", TOTAL))
     assert len(fig.axes) == 2
     for ax in fig.axes:
         lines = _lines(ax)
@@ -139,7 +140,9 @@ def test_fig09_draws_every_definition_with_its_fitted_rate(tmp_path):
 
 def test_energy_error_of_a_linear_field_is_exact(tmp_path):
     """A linear displacement u = G x is reproduced exactly by H8: the strain at every volume
-    point is sym(G), so against a constant reference strain the relative error is known."""
+    point is sym(G), so against a constant reference strain per body the error is known:
+    ||e||_b = |sym G - eps_b| sqrt(V_b) (Frobenius norm as the energy), here over a fixed
+    reference norm R; the whole problem's error is the root of the sum of squares."""
     case_file = REPO / "config" / "cases" / "planar.yaml"
     case = load_case(case_file)
     G = np.array([[1.0, 2.0, 0.0], [0.5, -3.0, 1.0], [0.0, 4.0, 2.0]]) * 1e-4
@@ -162,21 +165,23 @@ def test_energy_error_of_a_linear_field_is_exact(tmp_path):
         "case": "planar", "level": 0, "surface": "nurbs_fe", "status": "converged",
         "bodies": bodies, "steps": [{"load_factor": 1.0}]}))
     eps_ref = {"lower": np.diag([0.0, 1e-4, -2e-4]), "upper": np.diag([0.0, -1e-4, 3e-4])}
-    volumes = {}
+    volumes, R = {}, 3e-8
 
     def error(xq, w, strain, body):
         volumes[body] = w.sum()
         d = strain - eps_ref[body]
-        return np.sqrt(np.einsum("p,pij,pij->", w, d, d) / np.einsum("p,ij,ij->", w, eps_ref[body], eps_ref[body]))
+        return np.sqrt(np.einsum("p,pij,pij->", w, d, d)) / R
 
     rows = energy_errors(case_file, folder, error)
-    sym = 0.5 * (G + G.T)
+    sym, volume = 0.5 * (G + G.T), 0.0025 * 0.01 * 0.01
+    exact = {b: np.linalg.norm(sym - eps_ref[b]) * np.sqrt(volume) / R for b in eps_ref}
+    exact[TOTAL] = np.hypot(exact["lower"], exact["upper"])
+    assert [r.body for r in rows] == ["lower", "upper", TOTAL]
     for row in rows:
-        exact = np.linalg.norm(sym - eps_ref[row.body]) / np.linalg.norm(eps_ref[row.body])
-        assert row.error == pytest.approx(exact, rel=1e-10)
+        assert row.error == pytest.approx(exact[row.body], rel=1e-10)
         assert row.dofs == sum(b["dofs"] for b in bodies.values())
-        assert volumes[row.body] == pytest.approx(0.0025 * 0.01 * 0.01, rel=1e-10)
-    assert {r.body for r in rows} == {"lower", "upper"}
+        assert row.h == 0.00125
+    assert volumes == pytest.approx({"lower": volume, "upper": volume}, rel=1e-10)
 
 
 # ---------------------------------------------------------------- line figures
@@ -308,7 +313,7 @@ def test_claims_follow_the_fixture(tmp_path, holds):
     assert [c.reproduced for c in found] == [holds] * 4
     text = write_claims(tmp_path / "claims.md", found).read_text()
     assert text.count("| yes |") == (4 if holds else 0) and text.count("| no |") == (0 if holds else 4)
-    assert holds or "facets: lower 0.600, upper 0.600" in text
+    assert holds or "facets 0.600, nurbs_fe 1.000, nurbs_fit 1.100" in text
 
 
 def test_claim_two_poor_facets_and_failing_nurbs(tmp_path):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.figure import Figure
 
-from cgfem.report.energy import ErrorRow, read_error_tables
+from cgfem.report.energy import TOTAL, ErrorRow, read_error_tables
 from cgfem.report.style import colour, new_figure
 
 #: spatial dimension: DOFs grow like h^-3 in the 3D slab
@@ -40,14 +40,13 @@ def _slope_triangle(ax, dofs: np.ndarray, error: np.ndarray, rate: float) -> Non
             label=f"optimal O(h) = O(DOF^-1/{DIMENSION})")
 
 
-def fig09_energy_error(tables) -> Figure:
-    """Relative energy-norm error vs DOFs, one panel per body, one line per surface definition
-    (fitted rate in h in the legend) and the optimal-slope triangle. ``tables``: CSV paths of
-    :func:`cgfem.report.energy.write_error_table`."""
-    rows = read_error_tables(tables)
-    bodies = sorted({r.body for r in rows})
+def fig09_energy_error(tables, bodies: tuple[str, ...] = (TOTAL,)) -> Figure:
+    """Relative energy-norm error vs DOFs, one panel per entry of ``bodies`` (default: the
+    whole problem), one line per surface definition (fitted rate in h in the legend) and the
+    optimal-slope triangle. ``tables``: CSV paths of :func:`cgfem.report.energy.write_error_table`."""
+    rows = [r for r in read_error_tables(tables) if r.body in bodies]
     fitted = rates(rows)
-    fig, axes = new_figure(1, len(bodies), height=2.8)
+    fig, axes = new_figure(1, len(bodies), width=3.6 * len(bodies), height=2.8)
     for ax, body in zip(axes[0], bodies):
         for surface in sorted({r.surface for r in rows if r.body == body}):
             sel = sorted((r for r in rows if (r.surface, r.body) == (surface, body)),
@@ -57,6 +56,6 @@ def fig09_energy_error(tables) -> Figure:
         sel = [r for r in rows if r.body == body]
         _slope_triangle(ax, np.array([r.dofs for r in sel], float),
                         np.array([r.error for r in sel]), OPTIMAL_RATE)
-        ax.set(title=f"planar, body {body}", xlabel="DOFs", ylabel="relative energy-norm error")
+        ax.set(title="planar" if body == TOTAL else f"planar, body {body}", xlabel="DOFs", ylabel="relative energy-norm error")
         ax.legend()
     return fig

@@ -4,7 +4,9 @@ The run's displacement is read from its last ``step_NNN.vtu``; the cgFEM volume 
 body is rebuilt exactly as the run built it (same case, level and surface definition:
 :func:`cgfem.run.embed_body`), and the strain ``sym(grad u_h)`` is evaluated at its points.
 The error itself is the reference's business (``cgfem.reference.planar``): this module only
-hands it points, weights and strains, one body at a time.
+hands it points, weights and strains, one body at a time. Each body's number is its share of
+the error relative to the whole reference's energy norm, ``||e||_body / ||u_ref||``, so the
+squares add up: the row of body ``TOTAL`` holds ``||e|| / ||u_ref||`` of the whole problem.
 """
 
 from __future__ import annotations
@@ -24,13 +26,18 @@ from cgfem.geometry.builders import build_solid
 from cgfem.report.runs import BODY, DISPLACEMENT, Run, cell_values
 from cgfem.run import embed_body
 
-#: ``error(x (n, 3), w (n,), strain_h (n, 3, 3), body name) -> relative energy-norm error``
+#: ``error(x (n, 3), w (n,), strain_h (n, 3, 3), body name) -> ||e||_body / ||u_ref||``
 BodyError = Callable[[np.ndarray, np.ndarray, np.ndarray, str], float]
+
+
+#: body name of the row of all bodies together
+TOTAL = "all"
 
 
 @dataclass(frozen=True)
 class ErrorRow:
-    """Relative energy-norm error of one body of one run; ``dofs`` counts the whole run."""
+    """Energy-norm error of one body of one run relative to the reference's norm of the whole
+    problem (body ``TOTAL``: all bodies); ``dofs`` counts the whole run."""
 
     surface: str
     level: int
@@ -87,8 +94,8 @@ def volume_strain(case: Case, run: Run, body_name: str, u: np.ndarray, nodes: np
 
 
 def energy_errors(case_file: str | Path, run_folder: str | Path, error: BodyError) -> list[ErrorRow]:
-    """Relative energy-norm error of every body of a run at its last step (no rows for a run
-    without a converged step)."""
+    """Energy-norm error of every body of a run at its last step relative to the reference's
+    norm, and of all bodies (body ``TOTAL``); no rows for a run without a converged step."""
     case, run = load_case(case_file), Run.load(run_folder)
     rows: list[ErrorRow] = []
     if run.n_steps == 0:
@@ -97,6 +104,8 @@ def energy_errors(case_file: str | Path, run_folder: str | Path, error: BodyErro
         s = volume_strain(case, run, name, u, nodes)
         rows.append(ErrorRow(run.surface, run.level, name, run.dofs, float(run.body(name)["h"]),
                              float(error(s.x, s.w, s.strain, name))))
+    rows.append(ErrorRow(run.surface, run.level, TOTAL, run.dofs, max(r.h for r in rows),
+                         float(np.sqrt(sum(r.error**2 for r in rows)))))
     return rows
 
 
@@ -107,6 +116,7 @@ def reference_error(reference_file: str | Path) -> BodyError:
     reference = PlanarReference.load(reference_file)
 
     def error(x: np.ndarray, w: np.ndarray, strain: np.ndarray, body: str) -> float:
+        # ||e||_body / ||u_ref|| (the denominator is the reference's norm of both bodies)
         return float(relative_energy_error(reference, x, w, strain, body))
 
     return error
