@@ -19,6 +19,9 @@ import numpy as np
 from cgfem import __version__
 from cgfem.case.model import SURFACES, Body, Case
 from cgfem.embedding.quadrature import Embedding, embed, grid_for
+from cgfem.contact.assembly import summary as contact_summary
+from cgfem.contact.build import DEFINITIONS as CONTACT_DEFINITIONS, build_pair
+from cgfem.contact.output import write_contact
 from cgfem.errors import InputError
 from cgfem.fem.body import BodyModel, boundary_of
 from cgfem.fem.materials import von_mises
@@ -93,14 +96,24 @@ def _size(n_bytes: float) -> str:
 
 
 def embed_body(solid, body: Body, level: int, surface: str) -> Embedding:
-    """``body`` embedded in its grid of ``level`` with the quadrature of ``surface``."""
-    return embed(solid, grid_for(solid, body.grid.h0, level, body.grid.offset), SURFACES[surface])
+    """``body`` embedded in its grid of ``level`` for the surface definition ``surface``
+    (``facets``, ``nurbs_fe`` or ``nurbs_fit``): the boundary quadrature of
+    ``SURFACES[surface]``, the definition's name kept as ``Embedding.definition``."""
+    return embed(solid, grid_for(solid, body.grid.h0, level, body.grid.offset), SURFACES[surface],
+                 definition=surface)
 
 
 def build_models(case: Case, level: int, surface: str, log: Callable[[str], None]) -> tuple[list, dict]:
     """Embed and discretize every body; returns the models and per-body measures."""
-    if case.contact:
-        raise InputError("contact", "contact pairs are not implemented yet in `cgfem run`")
+    models, measures, _ = build_bodies(case, level, surface, log)
+    return models, measures
+
+
+def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None]) -> tuple[list, dict, dict]:
+    """Embed and discretize every body: the models, per-body measures and the solids."""
+    if case.contact and surface not in CONTACT_DEFINITIONS:
+        raise InputError("--surface", f"contact with {surface!r} is not implemented yet "
+                         f"(available: {', '.join(CONTACT_DEFINITIONS)})")
     solids = {b.name: build_solid(b.geometry) for b in case.bodies}
     brep = {name: brep_measures(solid) for name, solid in solids.items()}
     check_memory(case, level, brep)
@@ -119,7 +132,22 @@ def build_models(case: Case, level: int, surface: str, log: Callable[[str], None
             "brep_volume": brep[body.name][0], "brep_area": brep[body.name][1]}
         log(f"body {body.name}: {model.space.n_nodes} nodes, {model.n_dofs} dofs, "
             f"{int(model.space.cut.sum())} cut elements ({time.perf_counter() - tic:.2f} s)")
-    return models, measures
+    return models, measures, solids
+
+
+def build_pairs(case: Case, models: list[BodyModel], solids: dict, surface: str,
+                log: Callable[[str], None]) -> list:
+    """The contact pairs of ``case`` on ``models`` and their ``solids`` (by body name)."""
+    index = {m.name: i for i, m in enumerate(models)}
+    pairs = []
+    for spec in case.contact:
+        tic = time.perf_counter()
+        pair = build_pair(f"{spec.slave}/{spec.master}", spec, index, models, solids, surface,
+                          case.kinematics == "finite")
+        pairs.append(pair)
+        log(f"contact {pair.name}: {pair.n_points} slave points, penalty {pair.eps:.3g} Pa/m "
+            f"({time.perf_counter() - tic:.2f} s)")
+    return pairs
 
 
 def step_outputs(model: BodyModel, u: np.ndarray, recovered: np.ndarray) -> dict:
@@ -213,7 +241,7 @@ def run_case(case: Case, level: int, surface: str, out: Path,
     created = check_out(out)
     started = time.perf_counter()
     try:
-        models, measures = build_models(case, level, surface, log)
+        models, measures, solids = build_bodies(case, level, surface, log)
         try:
             out.mkdir(parents=True, exist_ok=True)
         except OSError as err:
@@ -221,8 +249,9 @@ def run_case(case: Case, level: int, surface: str, out: Path,
         clear_previous(out)
         built = time.perf_counter()
         steps: list[dict] = []
-        result = solve_static(System(models), case.steps, case.solver, log,
-                              lambda record: steps.append(_write_step(out, models, record, len(steps) + 1,
+        system = System(models, build_pairs(case, models, solids, surface, log))
+        result = solve_static(system, case.steps, case.solver, log,
+                              lambda record: steps.append(_write_step(out, system, record, len(steps) + 1,
                                                                       log)))
     except InputError:
         _remove_created(created)
@@ -237,9 +266,15 @@ def run_case(case: Case, level: int, surface: str, out: Path,
     return RunStatus(result.status, path, result.message)
 
 
-def _write_step(out: Path, models: list[BodyModel], record: StepRecord, number: int,
+def _write_step(out: Path, system: System, record: StepRecord, number: int,
                 log: Callable[[str], None]) -> dict:
     """Write the files of step ``number`` and return its entry of ``summary.json``."""
+    models = system.bodies
+    contact = {"force": [0.0, 0.0, 0.0], "active_points": 0, "max_pressure": 0.0, "pairs": {}}
+    if system.contact:
+        points = system.contact.points(np.concatenate(record.u))
+        write_contact(out, number, points)
+        contact = contact_summary(points, [p.name for p in system.contact.pairs])
     outputs = [step_outputs(m, u, s) for m, u, s in zip(models, record.u, record.recovered)]
     write_step(out, number, outputs)
     reactions = {}
@@ -251,7 +286,7 @@ def _write_step(out: Path, models: list[BodyModel], record: StepRecord, number: 
              "outer_passes": record.outer_passes, "outer_changes": record.outer_changes,
              "outer_converged": record.outer_converged,
              "reactions": reactions,
-             "contact": {"force": [0.0, 0.0, 0.0], "active_points": 0, "max_pressure": 0.0},
+             "contact": contact,
              "max_von_mises": {n: o["max_von_mises"] for n, o in zip(names, outputs)},
              "von_mises_max_nodal": {n: o["von_mises_max_nodal"] for n, o in zip(names, outputs)},
              "error_estimate": {n: o["error_estimate"] for n, o in zip(names, outputs)},

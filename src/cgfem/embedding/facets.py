@@ -32,7 +32,8 @@ boundary with the grid edges (paper, "Surface topology with the Marching cubes a
    surface is closed. ``FacetBoundary.misoriented`` counts triangles whose normal opposes
    the mean exact normal of their crossings (a diagnostic; the orientation is topological).
 3. A triangle's patch is the majority patch of its crossing vertices (ties: the first in loop
-   order); its quadrature points have ``uv = NaN`` (a facet point has no exact parameters).
+   order). A facet point has no exact parameters: its quadrature points carry the triangle
+   (``piece``) and their barycentric coordinates ``(l1, l2)`` in it as ``uv``.
 
 Element status for facets: OUTSIDE (all nodes outside), INSIDE (all inside), CUT (mixed).
 The material part of a cut element is bounded by its triangles and by the polygonal material
@@ -271,6 +272,23 @@ def _facet_kernel(cut, shape, node_inside, vkeys, vpos, vpatch, fkeys, finside,
 # the polyhedron and its quadrature
 # ------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
+class FacetSurface:
+    """The triangles of the ``facets`` surface definition, kept on the embedding.
+
+    triangles : (m, 3, 3) vertex positions (reference configuration), counterclockwise
+        about the outward normal
+    element : (m,) id of the grid element owning each triangle
+    patch : (m,) patch of each triangle (index in ``Embedding.patch_names``)
+
+    Row ``k`` is the triangle of the surface-rule points with ``piece == k``.
+    """
+
+    triangles: np.ndarray
+    element: np.ndarray
+    patch: np.ndarray
+
+
+@dataclass(frozen=True)
 class FacetBoundary:
     """The marching-cubes polyhedron of a body in its grid, and its boundary quadrature.
 
@@ -288,7 +306,8 @@ class FacetBoundary:
         ``axis * n_nodes + lowest node id`` of the face (shared by both of its elements)
     edge_intervals : per cut element (ascending ids), (k, 2) material intervals ``[z0, z1]``
         of its z edge ``(x_{i+1}, y_{j+1})`` on the polyhedron (k = 0 or 1)
-    surface : Gauss rule of total ``degree`` on the triangles (uv = NaN, flat normals)
+    surface : Gauss rule of total ``degree`` on the triangles (flat normals; ``piece`` the
+        triangle, ``uv`` the barycentrics ``(l1, l2)`` of the point in it)
     trims : ``points``-point Gauss rules on the segments of the cut elements' + faces
     ambiguous_face_key : (f,) sorted keys of the faces with four crossings;
         ambiguous_face_inside (f,) the inside status of their centres (the decision)
@@ -330,12 +349,14 @@ class FacetBoundary:
 
     def surface_rule(self, degree: int) -> SurfaceQuadrature:
         """Gauss rule exact for polynomials of total ``degree`` on every triangle of positive
-        area: (m * q,) rows, ``uv = NaN``, the triangle's unit normal and patch."""
+        area: (m * q,) rows with the triangle's unit normal, patch and id (``piece``, a row of
+        :attr:`triangles`), and ``uv`` the barycentric coordinates ``(l1, l2)`` of the point
+        in its triangle (``x = (1 - l1 - l2) v0 + l1 v1 + l2 v2``)."""
         bary, wq = triangle_rule(degree)
         t = self.triangles
         cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
         twice_area = np.linalg.norm(cross, axis=1)
-        keep = twice_area > 0.0
+        keep = np.flatnonzero(twice_area > 0.0)
         t, cross, twice_area = t[keep], cross[keep], twice_area[keep]
         q = wq.size
         x = np.einsum("qa,tad->tqd", bary, t).reshape(-1, 3)
@@ -343,7 +364,12 @@ class FacetBoundary:
         normal = np.repeat(cross / twice_area[:, None], q, axis=0)
         patch = np.repeat(self.triangle_patch[keep], q)
         element = np.repeat(self.triangle_element[keep], q)
-        return SurfaceQuadrature(patch, np.full((w.size, 2), np.nan), x, w, normal, element)
+        uv = np.tile(bary[:, 1:], (keep.size, 1))
+        return SurfaceQuadrature(patch, uv, x, w, normal, element, np.repeat(keep, q))
+
+    def facet_surface(self) -> "FacetSurface":
+        """The triangles with their owning elements and patches (what the embedding keeps)."""
+        return FacetSurface(self.triangles, self.triangle_element, self.triangle_patch)
 
     def trim_rule(self, points: int) -> TrimQuadrature:
         """``points``-point Gauss rules on the segments of the cut elements' +x, +y and +z

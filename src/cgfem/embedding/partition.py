@@ -30,6 +30,9 @@ MAX_POINTS = 12
 MAX_DEPTH = 40
 
 
+_SURFACE_FIELDS = ("patch", "uv", "x", "w", "normal", "element", "piece")
+
+
 @dataclass(frozen=True)
 class SurfaceQuadrature:
     """Quadrature of (a part of) the boundary, one row per point.
@@ -40,6 +43,12 @@ class SurfaceQuadrature:
     w : (n,) area weights
     normal : (n, 3) outward unit normals
     element : (n,) linear id of the grid element holding the point
+    piece : (n,) int, the piece of surface the point lies on: for the NURBS boundary the
+        Bezier piece of its patch (in the order of
+        :func:`cgfem.geometry.refine.bezier_patches`, numbered from 0 in every patch); for
+        facets the triangle (row of ``Embedding.facets.triangles``), and then ``uv`` holds
+        the barycentric coordinates ``(l1, l2)`` of the point in that triangle
+        (``x = (1 - l1 - l2) v0 + l1 v1 + l2 v2``)
     """
 
     patch: np.ndarray
@@ -48,11 +57,11 @@ class SurfaceQuadrature:
     w: np.ndarray
     normal: np.ndarray
     element: np.ndarray
+    piece: np.ndarray
 
     def select(self, mask: np.ndarray) -> "SurfaceQuadrature":
-        """The rows where ``mask`` holds."""
-        return SurfaceQuadrature(*(getattr(self, f)[mask] for f in
-                                   ("patch", "uv", "x", "w", "normal", "element")))
+        """The rows where ``mask`` holds (a boolean mask or row indices)."""
+        return SurfaceQuadrature(*(getattr(self, f)[mask] for f in _SURFACE_FIELDS))
 
 
 @dataclass(frozen=True)
@@ -125,11 +134,11 @@ def partition_surface(solid: Solid, grid: CartesianGrid, tol: float = DEFAULT_TO
     the target relative accuracy of each Gauss interval."""
     GX, GW = gauss_tables(max_points)
     rule = np.array([np.log(tol), min_points, max_points], float)
-    rows = {k: [] for k in ("patch", "uv", "x", "w", "normal", "element")}
+    rows = {k: [] for k in _SURFACE_FIELDS}
     trims = {k: [] for k in ("x", "w", "normal", "axis", "element")}
     approx = 0
     for ip, patch in enumerate(solid.patches):
-        for piece, (u0, u1), (v0, v1) in bezier_patches(patch.surface):
+        for leaf, (piece, (u0, u1), (v0, v1)) in enumerate(bezier_patches(patch.surface)):
             net = np.ascontiguousarray(piece.control)
             capacity = 4096
             (st, x, w, n, e, tx, tw, tm, taxis, tplane, n_approx) = _run_piece(net, grid, GX, GW, rule, capacity)
@@ -141,6 +150,7 @@ def partition_surface(solid: Solid, grid: CartesianGrid, tol: float = DEFAULT_TO
             rows["w"].append(w)  # |S_s x S_t| ds dt is already dA
             rows["normal"].append(n)
             rows["element"].append(grid.element_id(e))
+            rows["piece"].append(np.full(w.shape, leaf, np.int64))
             ijk = np.floor((tx - np.asarray(grid.origin)) / grid.h).astype(np.int64)
             ijk = np.clip(ijk, 0, np.asarray(grid.shape) - 1)
             rows_ = np.arange(tx.shape[0])
@@ -151,7 +161,6 @@ def partition_surface(solid: Solid, grid: CartesianGrid, tol: float = DEFAULT_TO
             trims["normal"].append(tm)
             trims["axis"].append(taxis)
             trims["element"].append(np.where(inside, grid.element_id(np.where(inside[:, None], ijk, 0)), -1))
-    surface = SurfaceQuadrature(*(np.concatenate(rows[k]) for k in
-                                  ("patch", "uv", "x", "w", "normal", "element")))
+    surface = SurfaceQuadrature(*(np.concatenate(rows[k]) for k in _SURFACE_FIELDS))
     trim = TrimQuadrature(*(np.concatenate(trims[k]) for k in ("x", "w", "normal", "axis", "element")))
     return SurfacePartition(surface, trim, approx)

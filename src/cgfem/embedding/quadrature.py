@@ -24,7 +24,8 @@ from functools import cached_property
 
 import numpy as np
 
-from cgfem.embedding.facets import facet_embedding_parts
+from cgfem.case.model import SURFACES
+from cgfem.embedding.facets import FacetSurface, facet_embedding_parts
 from cgfem.embedding.grid import CartesianGrid
 from cgfem.embedding.columns import ColumnRules, LineHits, column_rules
 from cgfem.embedding.lines import cast_lines, cast_z_lines
@@ -37,6 +38,8 @@ from cgfem.geometry.solid import Solid
 from cgfem.quadrature_rules import tensor_gauss
 
 OUTSIDE, INSIDE, CUT = 0, 1, 2
+#: the boundary quadratures :func:`embed` builds (the one of each contact surface
+#: definition is :data:`cgfem.case.model.SURFACES`)
 SURFACE_DEFINITIONS = ("nurbs", "facets")
 
 
@@ -48,6 +51,10 @@ class Embedding:
     volume : volume rule over the active (inside and cut) elements
     surface : boundary rule; ``surface.patch`` indexes ``patch_names``
     fallback : ids of the cut elements with a moment-fitted rule instead of a positive one
+    facets : the triangles of the ``facets`` definition (``surface.piece`` indexes them);
+        None for the NURBS boundary
+    definition : the surface definition the embedding was built for: ``facets``,
+        ``nurbs_fe`` or ``nurbs_fit`` (the last two share the NURBS quadrature)
     """
 
     grid: CartesianGrid
@@ -56,6 +63,8 @@ class Embedding:
     surface: SurfaceQuadrature
     patch_names: tuple[str, ...]
     fallback: np.ndarray
+    facets: FacetSurface | None
+    definition: str
 
     @cached_property
     def boundary(self) -> SurfaceQuadrature:
@@ -126,12 +135,20 @@ def _interior_rule(grid: CartesianGrid, elements: np.ndarray) -> VolumeRule:
 
 
 def embed(solid: Solid, grid: CartesianGrid, surface: str = "nurbs", tol: float = DEFAULT_TOL,
-          points: int = DEFAULT_POINTS, index: SurfaceIndex | None = None) -> Embedding:
+          points: int = DEFAULT_POINTS, index: SurfaceIndex | None = None,
+          definition: str | None = None) -> Embedding:
     """Classify the elements of ``grid`` and build the quadrature of ``solid`` for the
-    surface definition ``surface`` (``nurbs``: exact NURBS boundary; ``facets``: the
-    marching-cubes polyhedron of :mod:`cgfem.embedding.facets`)."""
+    boundary ``surface`` (``nurbs``: exact NURBS boundary; ``facets``: the marching-cubes
+    polyhedron of :mod:`cgfem.embedding.facets`). ``definition`` names the contact surface
+    definition the embedding serves (a key of :data:`cgfem.case.model.SURFACES`, whose value
+    must be ``surface``), by default ``facets`` or ``nurbs_fe``."""
     if surface not in SURFACE_DEFINITIONS:
         raise ValueError(f"unknown surface definition {surface!r} (known: {', '.join(SURFACE_DEFINITIONS)})")
+    if definition is None:
+        definition = "facets" if surface == "facets" else "nurbs_fe"
+    if SURFACES.get(definition) != surface:
+        raise ValueError(f"surface definition {definition!r} does not use the {surface!r} quadrature "
+                         f"(known: {SURFACES})")
     index = SurfaceIndex.build(solid) if index is None else index
     names = tuple(p.name for p in solid.patches)
     if surface == "facets":
@@ -141,7 +158,8 @@ def embed(solid: Solid, grid: CartesianGrid, surface: str = "nurbs", tol: float 
         rules = column_rules(grid, parts.cut, exact, parts.trims, parts.line_hits())
         fitted = _fallback_rule(grid, rules, parts.fitted_volume_args(points) if rules.fallback.size else None,
                                 points)
-        return _assemble(grid, parts.status, rules, fitted, parts.surface, names)
+        return _assemble(grid, parts.status, rules, fitted, parts.surface, names,
+                         parts.facet_surface(), definition)
     z_lines = cast_z_lines(index, grid)
     part = partition_surface(solid, grid, tol)
     status = np.zeros(grid.n_elements, np.int8)
@@ -163,7 +181,7 @@ def embed(solid: Solid, grid: CartesianGrid, surface: str = "nurbs", tol: float 
     args = dict(elements=fitted_elements, surf_x=s.x, surf_w=s.w, surf_nx=s.normal[:, 0], surf_element=s.element,
                 trim_x=t.x, trim_w=t.w, trim_my=t.normal[:, 1], trim_element=t.element, edge_intervals=edges)
     fitted = fitted_volume_rule(grid, **args, n=points)
-    return _assemble(grid, status, rules, fitted, part.surface, names)
+    return _assemble(grid, status, rules, fitted, part.surface, names, None, definition)
 
 
 def _fallback_rule(grid: CartesianGrid, rules: ColumnRules, args: dict | None, points: int) -> VolumeRule:
@@ -180,8 +198,9 @@ def _fallback_rule(grid: CartesianGrid, rules: ColumnRules, args: dict | None, p
 
 
 def _assemble(grid: CartesianGrid, status: np.ndarray, rules: ColumnRules, fitted: VolumeRule,
-              surface: SurfaceQuadrature, names: tuple[str, ...]) -> Embedding:
+              surface: SurfaceQuadrature, names: tuple[str, ...], facets: FacetSurface | None,
+              definition: str) -> Embedding:
     inner = _interior_rule(grid, np.flatnonzero(status == INSIDE))
     volume = VolumeRule(*(np.concatenate([getattr(inner, f), getattr(rules.volume, f), getattr(fitted, f)])
                           for f in ("x", "w", "element")))
-    return Embedding(grid, status, volume, surface, names, rules.fallback)
+    return Embedding(grid, status, volume, surface, names, rules.fallback, facets, definition)

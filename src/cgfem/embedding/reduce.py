@@ -8,12 +8,15 @@ functions, degree <= 2 in each variable. :func:`reduced_surface` keeps, per elem
 patch, at most 27 of the exact points with new positive weights (Caratheodory
 recombination, :func:`cgfem.embedding._column_kernels.recombine`) that integrate the 27
 tensor Legendre polynomials of the element exactly as the full rule does. The points keep
-their ``(xi, eta)``, normals and element, so they remain points of the exact surface;
-integrands with the normal or other non-polynomial factors are integrated to the accuracy
-of a 27-point rule instead of the full rule's.
+their ``(xi, eta)`` (barycentrics for facets), normals, element and piece, so they remain
+points of the exact surface (of the polyhedron for facets); integrands with the normal or
+other non-polynomial factors are integrated to the accuracy of a 27-point rule instead of
+the full rule's.
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
@@ -37,5 +40,4 @@ def reduced_surface(grid: CartesianGrid, surface: SurfaceQuadrature) -> SurfaceQ
     _k.recombine_groups(np.ascontiguousarray(surface.x[order]), np.ascontiguousarray(surface.w[order]),
                         np.ascontiguousarray(centre), 0.5 * grid.h, offsets, w)
     kept = order[w > 0.0]
-    return SurfaceQuadrature(surface.patch[kept], surface.uv[kept], surface.x[kept], w[w > 0.0],
-                             surface.normal[kept], surface.element[kept])
+    return replace(surface.select(kept), w=w[w > 0.0])

@@ -76,6 +76,12 @@ class BodyModel:
         return self.space.n_dofs
 
     @property
+    def definition(self) -> str:
+        """The contact surface definition of the body's embedding: ``facets``, ``nurbs_fe``
+        or ``nurbs_fit``."""
+        return self.embedding.definition
+
+    @property
     def finite(self) -> bool:
         return self.elasticity.model == NEO_HOOKEAN
 

@@ -33,17 +33,28 @@ class BoundaryPoints:
     points : positions, weights and local coordinates, grouped
     normal : (n, 3) outward unit normals (reference configuration)
     slots : (n,) active element of each point
+    patch : (n,) patch of each point (index in ``Embedding.patch_names``)
+    uv : (n, 2) the point's NURBS parameters ``(xi, eta)`` on its patch, or for facets its
+        barycentric coordinates ``(l1, l2)`` in its triangle
+    piece : (n,) Bezier piece of the patch (NURBS) or triangle id (facets,
+        a row of ``Embedding.facets.triangles``); see
+        :class:`cgfem.embedding.partition.SurfaceQuadrature`
     """
 
     points: ElementPoints
     normal: np.ndarray
     slots: np.ndarray
+    patch: np.ndarray
+    uv: np.ndarray
+    piece: np.ndarray
 
     @classmethod
     def of(cls, space: Space, surface: SurfaceQuadrature, mask: np.ndarray) -> "BoundaryPoints":
-        """The rows ``mask`` of the boundary rule ``surface``."""
-        points, order, slots = space.group(surface.x[mask], surface.w[mask], surface.element[mask])
-        return cls(points, surface.normal[mask][order], slots)
+        """The rows ``mask`` of the boundary rule ``surface``, grouped by element (every
+        per-point field permuted alike)."""
+        rows = surface.select(mask)
+        points, order, slots = space.group(rows.x, rows.w, rows.element)
+        return cls(points, rows.normal[order], slots, rows.patch[order], rows.uv[order], rows.piece[order])
 
     def interpolate(self, space: Space, nodal: np.ndarray) -> np.ndarray:
         """Values (n, ...) at the points of a nodal field (n_nodes, ...)."""
