@@ -3,8 +3,9 @@
 For each load step the load factor ``t`` goes up by ``1 / steps``. Inside a step the outer
 loop freezes the recovered stress ``P*`` of every body (the *frozen stress*, used by the
 weak Dirichlet conditions, later by contact), solves the nonlinear problem by Newton,
-recovers ``P*`` from the new displacement and repeats until ``P*`` changes by less than
-``outer_tol`` (relative, in the Frobenius norm over all nodes). ``outer_passes`` is only a
+recovers ``P*`` from the new displacement and repeats until ``P*`` changes by at most
+``outer_tol`` (relative, in the Frobenius norm over all nodes); the next pass freezes the
+recovery relaxed by Aitken's factor (:class:`Relaxation`). ``outer_passes`` is only a
 cap: a step that reaches it above ``outer_tol`` is kept but marked
 ``outer_converged = False`` (and the run's status says so, see :class:`StaticResult`).
 When Newton fails, the increment is halved (at most ``max_cutbacks`` times per step) and
@@ -22,6 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from cgfem.case.model import SolverOptions
+from cgfem.contact.assembly import ContactSet, active_changes
 from cgfem.fem.body import BodyModel
 from cgfem.solve.linear import choose_backend, factorize, rigid_body_modes
 from cgfem.solve.newton import newton
@@ -80,14 +82,28 @@ class Increment:
 class System:
     """The bodies of a case stacked into one vector of unknowns (block-diagonal tangent)."""
 
-    def __init__(self, bodies: list[BodyModel]):
+    def __init__(self, bodies: list[BodyModel], pairs: list | None = None):
+        """``pairs``: contact pairs (:class:`~cgfem.contact.pair.ContactPair`) between the
+        bodies, by their index in ``bodies``."""
         self.bodies = bodies
         sizes = [b.n_dofs for b in bodies]
         self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-        self.linear = not any(b.finite for b in bodies)
-        #: the tangent is symmetric: hyperelastic bulk, penalties, frozen recovered stress
-        self.symmetric = True
+        self.contact = ContactSet(list(pairs or []), self.offsets)
+        #: bodies without any Dirichlet condition (held by contact only)
+        self.floating = [i for i, b in enumerate(bodies) if not b.dirichlet] if self.contact else []
         self._K: sp.csr_matrix | None = None
+        self._shift: sp.csr_matrix | None = None
+
+    @property
+    def linear(self) -> bool:
+        """Small strain without contact: one tangent serves every iteration."""
+        return not any(b.finite for b in self.bodies) and not self.contact
+
+    @property
+    def symmetric(self) -> bool:
+        """Hyperelastic bulk, penalties and the frozen recovered stress give a symmetric
+        tangent; contact in finite strain does not (the current-area weight)."""
+        return self.contact.symmetric
 
     @property
     def n_dofs(self) -> int:
@@ -104,6 +120,7 @@ class System:
         parts = [b.assemble(ub, t, s, tangent and not (self.linear and self._K is not None))
                  for b, ub, s in zip(self.bodies, self.split(u), frozen_stress)]
         r = np.concatenate([p[0] for p in parts])
+        Kc = self.contact.add(u, r, tangent) if self.contact else None
         if not tangent:
             return r, None
         if self.linear and self._K is not None:
@@ -111,7 +128,24 @@ class System:
         K = sp.block_diag([p[1] for p in parts], format="csr")
         if self.linear:
             self._K = K
+        if Kc is not None:
+            K = (K + Kc.tocsr() + self._floating_shift(K)).tocsr()
         return r, K
+
+    def _floating_shift(self, K: sp.csr_matrix) -> sp.csr_matrix:
+        """Tangent-only stabilization of bodies held by contact alone: ``FLOATING_SHIFT``
+        times the diagonal of their first tangent is added to the matrix Newton solves, never
+        to the residual. It makes the rigid motions of such a body solvable before contact
+        forces hold it (and a frictionless spinning mode always), and leaves the converged
+        solution exactly that of the unstabilized equations: no stabilizing force remains."""
+        if self._shift is None:
+            d = np.zeros(self.n_dofs)
+            diag = K.diagonal()
+            for i in self.floating:
+                a, b = self.offsets[i], self.offsets[i + 1]
+                d[a:b] = FLOATING_SHIFT * diag[a:b]
+            self._shift = sp.diags(d, format="csr")
+        return self._shift
 
     def recover(self, u: np.ndarray) -> list[np.ndarray]:
         return [b.recover(ub) for b, ub in zip(self.bodies, self.split(u))]
@@ -159,10 +193,45 @@ def relative_change(new: list[np.ndarray], old: list[np.ndarray | None]) -> floa
     return float(np.sqrt(num / den)) if den > 0.0 else float(np.sqrt(num))
 
 
+class Relaxation:
+    """Aitken's dynamic relaxation (Irons-Tuck) of the fixed point ``P* -> recover(u(P*))``.
+
+    With the residual ``r_k = recover(u(P*_k)) - P*_k`` of pass ``k`` the next frozen
+    stress is ``P*_{k+1} = P*_k + omega_k r_k``, ``omega_k = -omega_{k-1} r_{k-1}.(r_k - r_{k-1})
+    / |r_k - r_{k-1}|^2`` (kept in ``[OMEGA_MIN, OMEGA_MAX]``), ``omega_0 = 1``: for a linear
+    contraction it removes the dominant eigencomponent of the error each pass. Disabled
+    (``enabled=False``) it is plain substitution, ``P*_{k+1} = recover(u(P*_k))``."""
+
+    OMEGA_MIN, OMEGA_MAX = 0.1, 4.0
+
+    def __init__(self, enabled: bool = True):
+        self.enabled = enabled
+        self.omega = 1.0
+        self._previous: np.ndarray | None = None
+
+    def next(self, frozen: list[np.ndarray | None], recovered: list[np.ndarray]) -> list[np.ndarray]:
+        """The frozen stress of the next pass."""
+        if not self.enabled or any(f is None for f in frozen):
+            return recovered
+        residual = np.concatenate([(r - f).ravel() for r, f in zip(recovered, frozen)])
+        if self._previous is not None:
+            d = residual - self._previous
+            dd = float(np.dot(d, d))
+            if dd > 0.0:
+                omega = -self.omega * float(np.dot(self._previous, d)) / dd
+                self.omega = float(np.clip(omega, self.OMEGA_MIN, self.OMEGA_MAX))
+        self._previous = residual
+        return [f + self.omega * (r - f) for r, f in zip(recovered, frozen)]
+
+
 Log = Callable[[str], None]
 
 #: iterations allowed to modified Newton (frozen tangent) in outer passes after the first
 MODIFIED_NEWTON_ITERATIONS = 6
+#: diagonal shift of the tangent of bodies held by contact only (:meth:`System._floating_shift`)
+FLOATING_SHIFT = 1e-8
+#: relax the outer loop's fixed point (:class:`Relaxation`); False: plain substitution
+ACCELERATE = True
 
 
 def solve_static(system: System, steps: int, options: SolverOptions, log: Log | None = None,
@@ -229,8 +298,16 @@ def _solve_increment(system: System, solver: _Solver, u0: np.ndarray,
     # increment. A cut-back increment has a tiny residual, but round-off scales with the
     # internal forces.
     reference = max(system.load_norm(t), system.force_scale(u))
+    relaxation = Relaxation(ACCELERATE)
+    following = recovered
+    contact = system.contact
+    contact.begin_increment()
+    active = contact.active()
+    settled = True
     for outer in range(1, options.outer_passes + 1):
-        frozen = recovered
+        frozen = following
+        if contact:
+            contact.freeze(u, frozen)      # p_N = n . sigma* . n, with the same frozen sigma*
 
         def assemble(v, tangent, frozen=frozen):
             return system.assemble(v, t, frozen, tangent)
@@ -256,9 +333,17 @@ def _solve_increment(system: System, solver: _Solver, u0: np.ndarray,
         residuals.append(result.residuals)
         recovered = system.recover(u)
         changes.append(relative_change(recovered, frozen))
-        log(f"t={t:.4g} pass {outer}: recovered stress changed by {changes[-1]:.3e}")
-        if changes[-1] <= options.outer_tol:
+        if contact:
+            previous, active = active, contact.active()
+            switched = active_changes(active, previous)
+            settled = outer > 1 and switched == 0
+            log(f"t={t:.4g} pass {outer}: recovered stress changed by {changes[-1]:.3e}, "
+                f"{int(sum(a.sum() for a in active))} active contact points ({switched} switched)")
+        else:
+            log(f"t={t:.4g} pass {outer}: recovered stress changed by {changes[-1]:.3e}")
+        if changes[-1] <= options.outer_tol and settled:
             break
+        following = relaxation.next(frozen, recovered)
     # reactions are in equilibrium with the stress the last solve held frozen; the next step
     # starts from the newest recovery
-    return Increment(u, frozen, recovered, residuals, changes, changes[-1] <= options.outer_tol)
+    return Increment(u, frozen, recovered, residuals, changes, changes[-1] <= options.outer_tol and settled)

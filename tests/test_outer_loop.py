@@ -1,0 +1,44 @@
+"""The outer loop's fixed-point relaxation (Aitken / Irons-Tuck) on affine maps."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cgfem.solve.static import Relaxation
+
+
+@pytest.mark.parametrize("a", [0.6, -0.5, 0.2])
+def test_relaxation_solves_a_scalar_contraction_after_two_recoveries(a):
+    """For G(x) = a x + b the secant factor is 1 / (1 - a): the second relaxed iterate is
+    the fixed point b / (1 - a) (plain substitution only approaches it as a^k)."""
+    rng = np.random.default_rng(4)
+    b = [rng.standard_normal((7, 3, 3)), rng.standard_normal((4, 3, 3))]     # two bodies
+    fixed = [bi / (1.0 - a) for bi in b]
+    relax = Relaxation()
+    x = [np.zeros_like(bi) for bi in b]
+    x = relax.next(x, [a * xi + bi for xi, bi in zip(x, b)])       # omega = 1 first
+    x = relax.next(x, [a * xi + bi for xi, bi in zip(x, b)])
+    assert relax.omega == pytest.approx(1.0 / (1.0 - a), rel=1e-12)
+    for xi, fi in zip(x, fixed):
+        assert np.abs(xi - fi).max() <= 1e-12 * np.abs(fi).max()
+    plain = Relaxation(enabled=False)
+    y = [np.zeros_like(bi) for bi in b]
+    for _ in range(2):
+        y = plain.next(y, [a * yi + bi for yi, bi in zip(y, b)])
+    error = max(np.abs(yi - fi).max() / np.abs(fi).max() for yi, fi in zip(y, fixed))
+    assert error == pytest.approx(abs(a) ** 2, rel=1e-12)
+
+
+def test_relaxation_starts_plain_and_bounds_its_factor():
+    """No frozen stress yet (None): the recovery itself; a slow contraction (a = 0.95, secant
+    factor 20) is clipped to OMEGA_MAX, and the next iterate still moves towards the fixed point."""
+    relax = Relaxation()
+    r = [np.ones((2, 3, 3))]
+    assert relax.next([None], r) is r
+    b = np.ones((2, 3, 3))
+    x = relax.next([np.zeros_like(b)], [b])
+    x = relax.next(x, [0.95 * x[0] + b])
+    assert relax.omega == Relaxation.OMEGA_MAX
+    assert np.allclose(x[0], 1.0 + 4.0 * 0.95)            # x1 + omega r1, r1 = 0.95 b
+    assert abs(x[0] - 20.0).max() < abs(0.95 + 1.0 - 20.0)  # nearer than plain substitution
