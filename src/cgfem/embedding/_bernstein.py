@@ -1,8 +1,8 @@
 """Numba kernels on Bernstein (Bezier) polynomials and rational Bezier patches.
 
 Local coordinates are ``[0, 1]``; a rational patch is a homogeneous net ``(p + 1, q + 1, 4)``
-of ``(w x, w y, w z, w)``. Used by :mod:`cgfem.embedding._partition_kernels` (numba's cache
-does not track changes across modules: after editing this file, clear ``__pycache__``).
+of ``(w x, w y, w z, w)``. Used by :mod:`cgfem.embedding._partition_kernels`; rational evaluation is
+:mod:`cgfem.geometry._bezier`'s. (numba's cache follows the imports: :mod:`cgfem._numba_cache`.)
 """
 
 from __future__ import annotations
@@ -10,56 +10,26 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-
-@njit(cache=True)
-def _binom(n, k):
-    c = 1.0
-    for j in range(1, k + 1):
-        c = c * (n - k + j) / j
-    return c
+from cgfem.geometry._bezier import bernstein_values, bezier_derivs, bezier_work
 
 
 @njit(cache=True)
-def bernstein(n, x, B, dB):
-    """Bernstein basis of degree ``n`` at ``x`` into ``B`` and its derivative into ``dB``."""
-    for i in range(n + 1):
-        B[i] = _binom(n, i) * x**i * (1.0 - x) ** (n - i)
-    if n == 0:
-        dB[0] = 0.0
-        return
-    for i in range(n + 1):
-        a = _binom(n - 1, i - 1) * x ** (i - 1) * (1.0 - x) ** (n - i) if i >= 1 else 0.0
-        b = _binom(n - 1, i) * x**i * (1.0 - x) ** (n - 1 - i) if i <= n - 1 else 0.0
-        dB[i] = n * (a - b)
-
-
-@njit(cache=True)
-def point_derivs(net, s, t, x, xs, xt):
-    """Rational point ``x`` and first derivatives ``xs, xt`` of Bernstein net ``net`` at
-    local ``(s, t)``."""
-    p = net.shape[0] - 1
-    q = net.shape[1] - 1
-    Bu = np.empty(p + 1)
-    dBu = np.empty(p + 1)
-    Bv = np.empty(q + 1)
-    dBv = np.empty(q + 1)
-    bernstein(p, s, Bu, dBu)
-    bernstein(q, t, Bv, dBv)
-    S = np.zeros(4)
-    Ss = np.zeros(4)
-    St = np.zeros(4)
-    for i in range(p + 1):
-        for j in range(q + 1):
-            for c in range(4):
-                v = net[i, j, c]
-                S[c] += Bu[i] * Bv[j] * v
-                Ss[c] += dBu[i] * Bv[j] * v
-                St[c] += Bu[i] * dBv[j] * v
-    w = S[3]
+def point_derivs(net, s, t, work, x, xs, xt):
+    """Rational point ``x`` and first derivatives ``xs, xt`` (3,) of the Bernstein net ``net``
+    (p + 1, q + 1, 4) at local ``(s, t)``: :func:`~cgfem.geometry._bezier.bezier_derivs` of
+    order 1 with the scratch ``work`` (a :class:`~cgfem.geometry._bezier.BezierWork`)."""
+    D = work.SKL
+    bezier_derivs(net, s, t, 1, work, D)
     for c in range(3):
-        x[c] = S[c] / w
-        xs[c] = (Ss[c] - Ss[3] * x[c]) / w
-        xt[c] = (St[c] - St[3] * x[c]) / w
+        x[c] = D[0, 0, c]
+        xs[c] = D[1, 0, c]
+        xt[c] = D[0, 1, c]
+
+
+@njit(cache=True)
+def net_work(net):
+    """A :class:`~cgfem.geometry._bezier.BezierWork` for ``net`` (either orientation)."""
+    return bezier_work(max(net.shape[0], net.shape[1]) - 1)
 
 
 @njit(cache=True)
@@ -214,8 +184,7 @@ def _line_coef(pnet, axis_k, c, sigma, coef):
     p = pnet.shape[0] - 1
     q = pnet.shape[1] - 1
     B = np.empty(p + 1)
-    dB = np.empty(p + 1)
-    bernstein(p, sigma, B, dB)
+    bernstein_values(p, sigma, B)
     for j in range(q + 1):
         acc = 0.0
         for i in range(p + 1):

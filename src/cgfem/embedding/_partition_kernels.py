@@ -29,9 +29,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from cgfem.embedding._bernstein import _inner_root, _split_net, point_derivs, univariate_roots
+from cgfem.embedding._bernstein import _inner_root, _split_net, net_work, point_derivs, univariate_roots
 from cgfem.embedding._partition_roots import (_boundary_coef, _classify, _crossing, _line_segments,
                                               _map_st, _root_sum)
+from cgfem.geometry._bezier import bezier_derivs
 
 MAX_FUNCS = 16
 #: uniform samples of the root difference of two planes per interval (crossing search)
@@ -66,10 +67,10 @@ def _element_of(x, origin, h, shape, ijk):
 
 
 @njit(cache=True)
-def _material_element(pnet, s, t, origin, h, shape, x, xs, xt, ijk):
+def _material_element(pnet, s, t, origin, h, shape, work, x, xs, xt, ijk):
     """Element of the surface point at ``(s, t)``, looked up a hair (1e-9 h) inside the
     material, so that a surface lying in a grid plane belongs to the element it bounds."""
-    point_derivs(pnet, s, t, x, xs, xt)
+    point_derivs(pnet, s, t, work, x, xs, xt)
     n = np.empty(3)
     n[0] = xs[1] * xt[2] - xs[2] * xt[1]
     n[1] = xs[2] * xt[0] - xs[0] * xt[2]
@@ -82,16 +83,17 @@ def _material_element(pnet, s, t, origin, h, shape, x, xs, xt, ijk):
 
 
 @njit(cache=True)
-def _emit_surface(pnet, s, t, weight, ijk, out_st, out_x, out_w, out_n, out_e, counts):
+def _emit_surface(pnet, s, t, weight, ijk, work, out_st, out_x, out_w, out_n, out_e, counts):
     """Append one surface point at local ``(s, t)`` with parametric weight ``weight``."""
     i = counts[0]
     if i >= out_w.shape[0]:
         counts[3] = 1
         return
-    x = np.empty(3)
-    xs = np.empty(3)
-    xt = np.empty(3)
-    point_derivs(pnet, s, t, x, xs, xt)
+    D = work.SKL
+    bezier_derivs(pnet, s, t, 1, work, D)
+    x = D[0, 0]
+    xs = D[1, 0]
+    xt = D[0, 1]
     nx = xs[1] * xt[2] - xs[2] * xt[1]
     ny = xs[2] * xt[0] - xs[0] * xt[2]
     nz = xs[0] * xt[1] - xs[1] * xt[0]
@@ -146,24 +148,25 @@ def _emit_cell(pnet, sa, sb, ta, tb, origin, h, shape, GX, GW, rule,
     xs = np.empty(3)
     xt = np.empty(3)
     ijk = np.empty(3, np.int64)
-    _material_element(pnet, 0.5 * (sa + sb), 0.5 * (ta + tb), origin, h, shape, x, xs, xt, ijk)
+    work = net_work(pnet)
+    _material_element(pnet, 0.5 * (sa + sb), 0.5 * (ta + tb), origin, h, shape, work, x, xs, xt, ijk)
     for a in range(ns):
         s = sa + GX[ns, a] * (sb - sa)
         for b in range(nt):
             t = ta + GX[nt, b] * (tb - ta)
-            _emit_surface(pnet, s, t, GW[ns, a] * GW[nt, b] * (sb - sa) * (tb - ta), ijk,
+            _emit_surface(pnet, s, t, GW[ns, a] * GW[nt, b] * (sb - sa) * (tb - ta), ijk, work,
                           out_st, out_x, out_w, out_n, out_e, counts)
 
 
 @njit(cache=True)
-def _curve_point(pnet, pn, k, c, sigma, ia, ib, swapped, icoef, x, xs, xt, tangent):
+def _curve_point(pnet, pn, k, c, sigma, ia, ib, swapped, icoef, work, x, xs, xt, tangent):
     """Point, surface derivatives and tangent ``dX/d sigma`` of the curve ``x_k = c`` at the
     outer coordinate ``sigma``; returns the local ``(s, t)``, or (-1, -1) if it has no root."""
     r = _inner_root(pn, k, c, sigma, ia, ib, icoef)
     if r < 0.0:
         return -1.0, -1.0
     s, t = _map_st(sigma, r, swapped)
-    point_derivs(pnet, s, t, x, xs, xt)
+    point_derivs(pnet, s, t, work, x, xs, xt)
     if swapped:
         xo = xt
         xi = xs
@@ -177,7 +180,7 @@ def _curve_point(pnet, pn, k, c, sigma, ia, ib, swapped, icoef, x, xs, xt, tange
 
 
 @njit(cache=True)
-def _curve_length(pnet, pn, k, c, a, b, n, ia, ib, swapped, GX, GW, icoef):
+def _curve_length(pnet, pn, k, c, a, b, n, ia, ib, swapped, GX, GW, icoef, work):
     """n-point Gauss estimate of the length of the curve ``x_k = c`` over ``[a, b]``."""
     x = np.empty(3)
     xs = np.empty(3)
@@ -185,7 +188,8 @@ def _curve_length(pnet, pn, k, c, a, b, n, ia, ib, swapped, GX, GW, icoef):
     tangent = np.empty(3)
     total = 0.0
     for g in range(n):
-        s, t = _curve_point(pnet, pn, k, c, a + GX[n, g] * (b - a), ia, ib, swapped, icoef, x, xs, xt, tangent)
+        s, t = _curve_point(pnet, pn, k, c, a + GX[n, g] * (b - a), ia, ib, swapped, icoef, work, x, xs,
+                            xt, tangent)
         if s >= 0.0:
             total += GW[n, g] * (b - a) * np.sqrt(tangent[0] ** 2 + tangent[1] ** 2 + tangent[2] ** 2)
     return total
@@ -219,6 +223,7 @@ def _trim_curve(pnet, pn, k, c, plane, x0, x1, ia, ib, swapped, GX, GW, rule, ic
     normal = np.empty(3)
     stack = np.empty((64, 2))
     depth = np.empty(64, np.int64)
+    work = net_work(pnet)
     stack[0, 0] = x0
     stack[0, 1] = x1
     depth[0] = 0
@@ -230,15 +235,15 @@ def _trim_curve(pnet, pn, k, c, plane, x0, x1, ia, ib, swapped, GX, GW, rule, ic
         d = depth[top]
         n = max(gauss_order(b - a, log_tol, int(rule[1]), int(rule[2]) - 2), N_CURVE)
         if d < 48 and top + 2 <= 64 and b - a > MIN_INTERVAL:
-            coarse = _curve_length(pnet, pn, k, c, a, b, n, ia, ib, swapped, GX, GW, icoef)
-            fine = _curve_length(pnet, pn, k, c, a, b, n + 2, ia, ib, swapped, GX, GW, icoef)
+            coarse = _curve_length(pnet, pn, k, c, a, b, n, ia, ib, swapped, GX, GW, icoef, work)
+            fine = _curve_length(pnet, pn, k, c, a, b, n + 2, ia, ib, swapped, GX, GW, icoef, work)
             if abs(coarse - fine) > tol * abs(fine):
                 top = _push_halves(stack, depth, top, a, b, d)
                 continue
         n = n + 2
         for g in range(n):
             s, t = _curve_point(pnet, pn, k, c, a + GX[n, g] * (b - a), ia, ib, swapped, icoef,
-                                x, xs, xt, tangent)
+                                work, x, xs, xt, tangent)
             if s < 0.0:
                 continue
             _unit_cross(xs, xt, normal)
@@ -326,6 +331,7 @@ def _integrate_cell(pnet, pn, onet, oa, ob, ia, ib, swapped, fk, fc, fplane, kin
     allbp[nbp:] = extra[:nextra]
     allbp.sort()
     ijk = np.empty(3, np.int64)
+    work = net_work(pnet)
     x = np.empty(3)
     xs = np.empty(3)
     xt = np.empty(3)
@@ -379,11 +385,11 @@ def _integrate_cell(pnet, pn, onet, oa, ob, ia, ib, swapped, fk, fc, fplane, kin
                     if t1 <= t0:
                         continue
                     s, t = _map_st(sigma, 0.5 * (t0 + t1), swapped)
-                    _material_element(pnet, s, t, origin, h, shape, x, xs, xt, ijk)
+                    _material_element(pnet, s, t, origin, h, shape, work, x, xs, xt, ijk)
                     ni = gauss_order(t1 - t0, log_tol, n_min, n_max)
                     for gg in range(ni):
                         s, t = _map_st(sigma, t0 + GX[ni, gg] * (t1 - t0), swapped)
-                        _emit_surface(pnet, s, t, wsig * GW[ni, gg] * (t1 - t0), ijk,
+                        _emit_surface(pnet, s, t, wsig * GW[ni, gg] * (t1 - t0), ijk, work,
                                       out_st, out_x, out_w, out_n, out_e, counts)
         # trimming curves on the grid planes, each integrated adaptively
         x0 = allbp[iv]
@@ -409,7 +415,7 @@ def _integrate_cell(pnet, pn, onet, oa, ob, ia, ib, swapped, fk, fc, fplane, kin
             ni = gauss_order(t1 - t0, log_tol, n_min, n_max)
             for gg in range(ni):
                 s, t = _map_st(sigma, t0 + GX[ni, gg] * (t1 - t0), swapped)
-                point_derivs(pnet, s, t, x, xs, xt)
+                point_derivs(pnet, s, t, work, x, xs, xt)
                 xi = xs if swapped else xt
                 _unit_cross(xs, xt, normal)
                 _emit_trim(x, normal, xi, GW[ni, gg] * (t1 - t0), fk[f], fplane[f], s, t,

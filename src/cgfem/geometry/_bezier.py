@@ -116,7 +116,7 @@ def bernstein_ders(p, x, order, B):
         _raise_degree(N, k, x, y)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def bezier_derivs(net, s, t, d, work, SKL):
     """Rational Bezier patch ``net`` (p + 1, q + 1, 4) and its derivatives up to order
     ``d <= 2`` at ``(s, t)`` into ``SKL`` (>= d + 1, >= d + 1, 3), entries ``k + l <= d``

@@ -12,6 +12,8 @@ The public wrappers are in :mod:`cgfem.geometry.nurbs`; these kernels do no vali
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -106,9 +108,15 @@ def ders_basis_funs(i, u, p, n, U, ders):
         r *= p - k
 
 
+#: Pascal's triangle ``C(n, k)``, ``n, k < 16`` (a constant table: no division in hot loops).
+_PASCAL = np.array([[math.comb(n, k) for k in range(16)] for n in range(16)], dtype=np.float64)
+
+
 @njit(cache=True)
 def binomial(n, k):
     """Binomial coefficient ``C(n, k)`` as a float (``0 <= k <= n``)."""
+    if n < _PASCAL.shape[0]:
+        return _PASCAL[n, k]
     c = 1.0
     for j in range(1, k + 1):
         c = c * (n - k + j) / j
@@ -124,17 +132,29 @@ def contract_net(Pw, i0, j0, Nu, Nv, p, q, d, temp, SKLw):
     Shared by NURBS surfaces (B-spline basis) and Bezier leaves (Bernstein basis)."""
     for k in range(d + 1):
         for s in range(q + 1):
-            for c in range(4):
-                acc = 0.0
-                for r in range(p + 1):
-                    acc += Nu[k, r] * Pw[i0 + r, j0 + s, c]
-                temp[s, c] = acc
+            a0 = a1 = a2 = a3 = 0.0
+            for r in range(p + 1):
+                b = Nu[k, r]
+                a0 += b * Pw[i0 + r, j0 + s, 0]
+                a1 += b * Pw[i0 + r, j0 + s, 1]
+                a2 += b * Pw[i0 + r, j0 + s, 2]
+                a3 += b * Pw[i0 + r, j0 + s, 3]
+            temp[s, 0] = a0
+            temp[s, 1] = a1
+            temp[s, 2] = a2
+            temp[s, 3] = a3
         for l in range(d - k + 1):
-            for c in range(4):
-                acc = 0.0
-                for s in range(q + 1):
-                    acc += Nv[l, s] * temp[s, c]
-                SKLw[k, l, c] = acc
+            a0 = a1 = a2 = a3 = 0.0
+            for s in range(q + 1):
+                b = Nv[l, s]
+                a0 += b * temp[s, 0]
+                a1 += b * temp[s, 1]
+                a2 += b * temp[s, 2]
+                a3 += b * temp[s, 3]
+            SKLw[k, l, 0] = a0
+            SKLw[k, l, 1] = a1
+            SKLw[k, l, 2] = a2
+            SKLw[k, l, 3] = a3
 
 
 @njit(cache=True)
@@ -161,18 +181,49 @@ def rat_surface_derivs(SKLw, d, SKL):
     """A4.4 RatSurfaceDerivs: Cartesian derivatives ``SKL[k, l]`` (3-vectors, ``k + l <= d``)
     from the homogeneous ones ``SKLw``. The one quotient rule of the package (NURBS surfaces
     and Bezier leaves); allocation-free, for hot loops."""
+    inv_w = 1.0 / SKLw[0, 0, 3]
+    if d <= 2:  # the same recursion written out (no loops: the hot case of the queries)
+        for c in range(3):
+            SKL[0, 0, c] = SKLw[0, 0, c] * inv_w
+        if d == 0:
+            return
+        ws = SKLw[1, 0, 3]
+        wt = SKLw[0, 1, 3]
+        for c in range(3):
+            SKL[1, 0, c] = (SKLw[1, 0, c] - ws * SKL[0, 0, c]) * inv_w
+            SKL[0, 1, c] = (SKLw[0, 1, c] - wt * SKL[0, 0, c]) * inv_w
+        if d == 1:
+            return
+        for c in range(3):
+            SKL[2, 0, c] = (SKLw[2, 0, c] - 2.0 * ws * SKL[1, 0, c] - SKLw[2, 0, 3] * SKL[0, 0, c]) * inv_w
+            SKL[1, 1, c] = (SKLw[1, 1, c] - ws * SKL[0, 1, c] - wt * SKL[1, 0, c]
+                            - SKLw[1, 1, 3] * SKL[0, 0, c]) * inv_w
+            SKL[0, 2, c] = (SKLw[0, 2, c] - 2.0 * wt * SKL[0, 1, c] - SKLw[0, 2, 3] * SKL[0, 0, c]) * inv_w
+        return
     for k in range(d + 1):
         for l in range(d - k + 1):
-            for c in range(3):
-                v = SKLw[k, l, c]
+            v0 = SKLw[k, l, 0]
+            v1 = SKLw[k, l, 1]
+            v2 = SKLw[k, l, 2]
+            for j in range(1, l + 1):
+                b = binomial(l, j) * SKLw[0, j, 3]
+                v0 -= b * SKL[k, l - j, 0]
+                v1 -= b * SKL[k, l - j, 1]
+                v2 -= b * SKL[k, l - j, 2]
+            for i in range(1, k + 1):
+                b = binomial(k, i)
+                bw = b * SKLw[i, 0, 3]
+                v0 -= bw * SKL[k - i, l, 0]
+                v1 -= bw * SKL[k - i, l, 1]
+                v2 -= bw * SKL[k - i, l, 2]
                 for j in range(1, l + 1):
-                    v -= binomial(l, j) * SKLw[0, j, 3] * SKL[k, l - j, c]
-                for i in range(1, k + 1):
-                    v2 = SKLw[i, 0, 3] * SKL[k - i, l, c]
-                    for j in range(1, l + 1):
-                        v2 += binomial(l, j) * SKLw[i, j, 3] * SKL[k - i, l - j, c]
-                    v -= binomial(k, i) * v2
-                SKL[k, l, c] = v / SKLw[0, 0, 3]
+                    bw = b * binomial(l, j) * SKLw[i, j, 3]
+                    v0 -= bw * SKL[k - i, l - j, 0]
+                    v1 -= bw * SKL[k - i, l - j, 1]
+                    v2 -= bw * SKL[k - i, l - j, 2]
+            SKL[k, l, 0] = v0 * inv_w
+            SKL[k, l, 1] = v1 * inv_w
+            SKL[k, l, 2] = v2 * inv_w
 
 
 @njit(cache=True)
