@@ -332,3 +332,47 @@ def test_bad_input_raises_input_error_naming_the_field(args, field):
     with pytest.raises(InputError) as info:
         NurbsSurface(**args)
     assert info.value.field == field
+
+
+def test_third_order_rational_derivatives_match_geomdl():
+    """The general A4.4 loop (orders above 2, which the written-out quotient rule does not
+    cover) against geomdl on rational bicubic surfaces."""
+    pytest.importorskip("geomdl")
+    rng = np.random.default_rng(11)
+    for _ in range(10):
+        S = random_surface(rng, 3, 3)
+        g = geomdl_surface(S)
+        uv = rng.uniform(0.0, 1.0, (5, 2))
+        ders = S.derivatives(uv, 3)
+        for i, (u, v) in enumerate(uv):
+            ref = np.array(g.derivatives(u, v, order=3))  # (4, 4, 3)
+            scale = max(1.0, np.abs(ref).max())
+            for k in range(4):
+                for l in range(4 - k):
+                    np.testing.assert_allclose(ders[i, k, l], ref[k, l], rtol=0, atol=1e-11 * scale)
+
+
+@pytest.mark.parametrize("p, q", [(1, 2), (2, 2), (3, 1), (4, 3)])
+def test_bezier_patch_derivatives_match_geomdl(p, q):
+    """The Bezier evaluator of the queries and the embedding (Bernstein basis, same
+    contraction and quotient rule) against geomdl on a rational Bezier patch, orders 0-2;
+    the per-thread scratch is reused between calls of different orders."""
+    pytest.importorskip("geomdl")
+    from cgfem.geometry._bezier import bezier_derivs, bezier_work
+
+    rng = np.random.default_rng(p * 10 + q)
+    knots_u = np.repeat([0.0, 1.0], p + 1)
+    knots_v = np.repeat([0.0, 1.0], q + 1)
+    S = NurbsSurface.from_points((p, q), knots_u, knots_v, rng.uniform(-1.0, 1.0, (p + 1, q + 1, 3)),
+                                 rng.uniform(0.5, 1.5, (p + 1, q + 1)))
+    g = geomdl_surface(S)
+    work = bezier_work(4)
+    SKL = np.full((3, 3, 3), np.nan)
+    for s, t in np.vstack([rng.uniform(0.0, 1.0, (6, 2)), [[0.0, 0.0], [1.0, 0.5]]]):
+        ref = np.array(g.derivatives(s, t, order=2))
+        scale = max(1.0, np.abs(ref).max())
+        for d in (2, 0, 1):
+            bezier_derivs(S.control, s, t, d, work, SKL)
+            for k in range(d + 1):
+                for l in range(d + 1 - k):
+                    np.testing.assert_allclose(SKL[k, l], ref[k, l], rtol=0, atol=1e-12 * scale)
