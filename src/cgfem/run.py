@@ -182,23 +182,12 @@ def step_outputs(model: BodyModel, u: np.ndarray, recovered: np.ndarray) -> dict
     norm = energy_norm(vol, sigma_h, el.mu, el.lam)
     status = np.where(space.cut, 2, 1)
     surface = {"points": boundary.points.x, "displacement": boundary.values(space, u),
-               "stress": stress_boundary, "von_mises": vm_boundary, "patch": boundary_patch(model)}
+               "stress": stress_boundary, "von_mises": vm_boundary, "patch": boundary.patch}
     return {"points": space.coordinates, "cells": space.connectivity, "displacement": u.reshape(-1, 3),
             "stress": nodal_cauchy, "von_mises_nodal": vm_nodes, "status": status,
             "von_mises_max_qp": per_element, "max_von_mises": float(per_element.max(initial=0.0)),
             "von_mises_max_nodal": float(vm_nodes.max(initial=0.0)), "surface": surface,
             "error_estimate": float(eta), "energy_norm": float(norm)}
-
-
-def boundary_patch(model: BodyModel) -> np.ndarray:
-    """Patch index (into ``model.embedding.patch_names``) of every boundary-rule point
-    (n,), in the order of ``model.boundary_points``."""
-    points = model.boundary_points
-    patch = getattr(points, "patch", None)
-    if patch is None:   # BoundaryPoints groups the rule by element with a stable sort
-        surface = model.embedding.boundary
-        patch = surface.patch[np.argsort(model.space.slot(surface.element), kind="stable")]
-    return np.asarray(patch, np.int32)
 
 
 def check_out(out: Path) -> list[Path]:
