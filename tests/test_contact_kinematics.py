@@ -93,10 +93,15 @@ def test_gap_is_the_distance_along_the_normal(definition):
     n_s, n_m = pair.slave_space.n_dofs, pair.master_space.n_dofs
     pair.assemble(np.zeros(n_s), np.zeros(n_m), False)
     hits, X = pair.state.hits, pair.frames.X
-    found = hits.found
+    # facets chamfer the box's edges: their tilted triangles look sideways, past the sphere
+    normal_z = np.cross(pair.frames.A, pair.frames.B)[:, 2] / np.linalg.norm(
+        np.cross(pair.frames.A, pair.frames.B), axis=1)
+    down = normal_z < -0.999
+    assert down.mean() > 0.6
+    assert hits.found[down].all()
+    found = hits.found & down
     exact = 0.93 - np.sqrt(1.0 - X[found, 0] ** 2 - X[found, 1] ** 2)
     error = np.abs(hits.g[found] - exact).max()
-    assert found.all()
     if definition == "nurbs_fe":
         assert error < 1e-12
     else:

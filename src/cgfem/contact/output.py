@@ -4,7 +4,8 @@ Point data: ``gap`` (m, signed, NaN where the ray found no master), ``pressure``
 Pa, negative in compression, 0 where inactive), ``p_N`` (the frozen stabilizing stress),
 ``active`` (0/1), ``normal`` (current unit slave normal), ``weight`` (area weight, m^2: the
 current area in finite strain, so ``sum pressure * weight * normal`` is the contact force on
-the slave) and ``pair`` (index of the pair in the case's ``contact`` list). Points sit at
+the slave when the surfaces are parallel), ``force`` (the exact point force on the slave, N,
+summing to the pair's contact force) and ``pair`` (index of the pair in the case's ``contact`` list). Points sit at
 their current positions.
 """
 
@@ -29,6 +30,7 @@ def contact_mesh(points: list[ContactPoints]) -> meshio.Mesh:
         "active": np.concatenate([p.active for p in points]).astype(np.int32) if points else np.zeros(0, np.int32),
         "normal": np.concatenate([p.normal for p in points]) if points else np.zeros((0, 3)),
         "weight": np.concatenate([p.weight for p in points]) if points else np.zeros(0),
+        "force": np.concatenate([p.point_force for p in points]) if points else np.zeros((0, 3)),
         "pair": np.concatenate([np.full(p.x.shape[0], i, np.int32) for i, p in enumerate(points)])
         if points else np.zeros(0, np.int32),
     }

@@ -21,7 +21,9 @@ small strain ``w`` is the reference area and ``K_c`` is symmetric.
 conditions: :meth:`ContactPair.freeze` computes it from ``sigma*`` and the current normal at
 the start of each pass of the outer loop, which refreshes both.
 
-The active set is re-evaluated at every residual evaluation (a semismooth Newton method).
+The active set is re-evaluated at every residual evaluation (a semismooth Newton method);
+a point counts as active up to ``p_N + eps g <= eps CLOSED_GAP_H h``, so surfaces that touch
+initially (a gap of round-off size) start in contact.
 Chattering protection: once a point has switched :data:`MAX_SWITCHES` times within one
 load increment, its tangent contribution is held active for the rest of the increment,
 while its residual stays exact: the converged solution is unchanged, only the convergence
@@ -41,6 +43,9 @@ from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface, RayHits, elemen
 MAX_SWITCHES = 4
 #: largest |gap| searched, in slave element sizes
 MAX_GAP_H = 2.0
+#: a gap below this fraction of h counts as closed when the active set is decided (initially
+#: touching surfaces, round-off of the facet intersections); lambda_N itself is unchanged
+CLOSED_GAP_H = 1e-9
 
 
 @dataclass
@@ -58,9 +63,12 @@ class ContactState:
 class ContactPoints:
     """Slave points of a pair in the current configuration (what ``contact_NNN.vtu`` shows).
 
-    x (n, 3), normal (n, 3), gap (n,) (NaN: no master hit), pressure (n,) lambda_N (Pa,
-    negative in compression, 0 where inactive), active (n,) bool, weight (n,) area weight
-    (so that ``sum pressure * weight * normal`` is the contact force on the slave)
+    x (n, 3), normal (n, 3) slave normal, gap (n,) (NaN: no master hit), pressure (n,)
+    lambda_N (Pa, negative in compression, 0 where inactive), active (n,) bool, weight (n,)
+    area weight, p_N (n,) the frozen stabilizing stress, point_force (n, 3) the force the
+    master exerts on the slave at the point, ``-w lambda_N q`` with ``q = dg/dx1`` (the
+    master normal scaled by ``1 / (n2 . n1)``): along ``pressure * weight * normal`` when the
+    surfaces are parallel, and exactly the force the residual applies in any case
     """
 
     x: np.ndarray
@@ -70,11 +78,12 @@ class ContactPoints:
     active: np.ndarray
     weight: np.ndarray
     p_N: np.ndarray
+    point_force: np.ndarray
 
     @property
     def force(self) -> np.ndarray:
-        """Force (3,) the master exerts on the slave."""
-        return (self.pressure * self.weight) @ self.normal
+        """Force (3,) the master exerts on the slave (equal and opposite on the master)."""
+        return self.point_force.sum(axis=0)
 
 
 @dataclass
@@ -176,7 +185,7 @@ class ContactPair:
 
     def _multiplier(self, hits: RayHits) -> tuple[np.ndarray, np.ndarray]:
         trial = np.where(hits.found, self.state.p_N + self.eps * np.where(hits.found, hits.g, 0.0), np.inf)
-        active = hits.found & (trial <= 0.0)
+        active = hits.found & (trial <= self.eps * CLOSED_GAP_H * self.slave_space.h)
         return np.where(active, trial, 0.0), active
 
     def _record(self, hits: RayHits, active: np.ndarray) -> None:
@@ -192,8 +201,15 @@ class ContactPair:
         lam, active = self._multiplier(hits)
         w = self.frames.w * (st.norm_m / np.linalg.norm(np.cross(self.frames.A, self.frames.B), axis=1)
                              if self.finite else 1.0)
+        force = np.zeros((self.n_points, 3))
+        rows = np.flatnonzero(active)
+        if rows.size:
+            t = self.surface.evaluate(u_m, hits.piece[rows], hits.theta[rows], second=False).t
+            m2 = np.cross(t[:, 0], t[:, 1])
+            q = -m2 / np.einsum("pk,pk->p", m2, st.n[rows])[:, None]
+            force[rows] = -(w[rows] * lam[rows])[:, None] * q
         return ContactPoints(st.x, st.n, np.where(hits.found, hits.g, np.nan), lam, active, w,
-                             self.state.p_N.copy())
+                             self.state.p_N.copy(), force)
 
 
 def slave_gradients(space, frames: SlaveFrames) -> np.ndarray:

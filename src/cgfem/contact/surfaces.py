@@ -125,18 +125,19 @@ class NurbsFeSurface:
         return SlaveFrames(slots, rule.x.copy(), A, B, N, ca, cb, rule.w.copy())
 
     # -- master side ---------------------------------------------------------------------
-    def evaluate(self, u: np.ndarray, piece: np.ndarray, theta: np.ndarray) -> MasterPoints:
-        """The current master surface at ``(piece, theta)`` (n,), (n, 2)."""
+    def evaluate(self, u: np.ndarray, piece: np.ndarray, theta: np.ndarray, second: bool = True) -> MasterPoints:
+        """The current master surface at ``(piece, theta)`` (n,), (n, 2); without
+        ``second`` the second derivatives ``s`` are left zero (the search needs none)."""
         n = piece.size
-        Q = np.empty((n, 3, 3, 3))
+        order = 2 if second else 1
+        Q = np.zeros((n, 3, 3, 3))
         for pid in np.unique(piece):
             rows = piece == pid
             srf = self.solid.patches[pid].surface
             (u0, u1), (v0, v1) = srf.domain
             uv = np.column_stack([np.clip(theta[rows, 0], u0, u1), np.clip(theta[rows, 1], v0, v1)])
-            Q[rows] = srf.derivatives(uv, 2)
+            Q[rows, :order + 1, :order + 1] = srf.derivatives(uv, order)
         X, Qt = Q[:, 0, 0], np.stack([Q[:, 1, 0], Q[:, 0, 1]], axis=1)
-        Qs = np.stack([np.stack([Q[:, 2, 0], Q[:, 1, 1]], 1), np.stack([Q[:, 1, 1], Q[:, 0, 2]], 1)], 1)
         normal0 = np.cross(Qt[:, 0], Qt[:, 1])
         slots, xi = _locate(self.space, X, -normal0)
         N, dN, d2N = shape_derivatives(xi, self.h)
@@ -144,9 +145,12 @@ class NurbsFeSurface:
         psi = np.einsum("paj,pcj->pca", dN, Qt)                     # dN . Q_alpha  (n, 2, 8)
         x = X + np.einsum("pa,pak->pk", N, U)
         t = Qt + np.einsum("pca,pak->pck", psi, U)
-        coef = (np.einsum("pajl,pcj,pdl->pcda", d2N, Qt, Qt)
-                + np.einsum("paj,pcdj->pcda", dN, Qs))               # (n, 2, 2, 8)
-        s = Qs + np.einsum("pcda,pak->pcdk", coef, U)
+        s = np.zeros((n, 2, 2, 3))
+        if second:
+            Qs = np.stack([np.stack([Q[:, 2, 0], Q[:, 1, 1]], 1), np.stack([Q[:, 1, 1], Q[:, 0, 2]], 1)], 1)
+            coef = (np.einsum("pajl,pcj,pdl->pcda", d2N, Qt, Qt)
+                    + np.einsum("paj,pcdj->pcda", dN, Qs))           # (n, 2, 2, 8)
+            s = Qs + np.einsum("pcda,pak->pcdk", coef, U)
         m2 = np.cross(t[:, 0], t[:, 1])
         normal = m2 / np.linalg.norm(m2, axis=1)[:, None]
         return MasterPoints(x, t, s, N, psi, slots, normal)
@@ -159,9 +163,11 @@ class NurbsFeSurface:
         seeds_x = self._seed_positions(u)
         k = min(CANDIDATES, seeds_x.shape[0])
         tree = cKDTree(seeds_x)
-        _, near = tree.query(x1, k=k)
-        near = near.reshape(n, k)
-        unresolved = np.ones(n, bool)
+        dist, near = tree.query(x1, k=k)
+        near, dist = near.reshape(n, k), dist.reshape(n, k)
+        # a hit within max_gap lies within max_gap of x1, and every point of the surface
+        # has a seed within about one element: farther points cannot hit
+        unresolved = dist[:, 0] <= max_gap + 2.0 * self.h
         if previous is not None and np.any(previous.found):
             # the previous pairing first: if it is still an admissible hit, it stays
             rows = np.flatnonzero(previous.found)
@@ -171,6 +177,8 @@ class NurbsFeSurface:
             rows = np.flatnonzero(unresolved)
             if rows.size == 0:
                 break
+            # further seeds matter: a patch may close on itself (a seam), where Newton from
+            # one side stops at the domain's edge while the hit lies just across
             seeds = near[rows, c]
             self._try(u, x1, n1, max_gap, rows, self.seed_piece[seeds], self.seed_theta[seeds], best)
         return best
@@ -178,10 +186,10 @@ class NurbsFeSurface:
     def _try(self, u, x1, n1, max_gap, rows, piece, theta, best: RayHits) -> None:
         """Ray Newton for points ``rows`` from ``(piece, theta)``; admissible hits nearer
         than the best so far replace it (in place)."""
-        ok, th, g = self._ray_newton(u, x1[rows], n1[rows], piece, theta.copy())
+        ok, th, g = self._ray_newton(u, x1[rows], n1[rows], piece, theta.copy(), max_gap)
         admissible = ok & (np.abs(g) <= max_gap)
         if np.any(admissible):
-            mp = self.evaluate(u, piece, th)
+            mp = self.evaluate(u, piece, th, second=False)
             admissible &= np.einsum("pk,pk->p", mp.normal, n1[rows]) < 0.0
         better = admissible & (np.abs(g) < np.abs(best.g[rows]) - 1e-14 * self.h)
         r = rows[better]
@@ -199,7 +207,7 @@ class NurbsFeSurface:
             X[rows] = self.solid.patches[pid].surface.evaluate(self.seed_theta[rows])
         return X + np.einsum("pa,pak->pk", N, U)
 
-    def _ray_newton(self, u, x1, n1, piece, theta):
+    def _ray_newton(self, u, x1, n1, piece, theta, max_gap):
         """Newton on ``x2(theta) - x1 - g n1 = 0`` for ``(theta, g)``; converged (n,), theta, g."""
         n = x1.shape[0]
         g = np.zeros(n)
@@ -212,7 +220,7 @@ class NurbsFeSurface:
         for _ in range(MAX_RAY_NEWTON):
             if active.size == 0:
                 break
-            mp = self.evaluate(u, piece[active], theta[active])
+            mp = self.evaluate(u, piece[active], theta[active], second=False)
             F = mp.x - x1[active] - g[active, None] * n1[active]
             J = np.stack([mp.t[:, 0], mp.t[:, 1], -n1[active]], axis=2)
             det_ok = np.abs(np.linalg.det(J)) > 1e-300
@@ -220,15 +228,18 @@ class NurbsFeSurface:
             step[det_ok] = -np.linalg.solve(J[det_ok], F[det_ok][..., None])[..., 0]
             done = np.linalg.norm(F, axis=1) <= RAY_TOL * self.h
             ok[active[done]] = True
-            go = ~done & det_ok
+            # a ray that runs far beyond the search distance is no hit from this start
+            go = ~done & det_ok & (np.abs(g[active]) <= 4.0 * max_gap)
             idx = active[go]
             theta[idx] += step[go, :2]
             g[idx] += step[go, 2]
             pl, ph = lo[piece[idx]], hi[piece[idx]]
             # a step that leaves the patch's domain is cut back onto it; a point that stays
             # outside is no hit on this patch (a neighbouring patch's seed finds it)
-            theta[idx] = np.clip(theta[idx], pl, ph)
-            active = idx
+            clipped = np.clip(theta[idx], pl, ph)
+            stuck = np.all(clipped == theta[idx] - step[go, :2], axis=1) & np.any(clipped != theta[idx], axis=1)
+            theta[idx] = clipped
+            active = idx[~stuck]
         return ok, theta, g
 
 
@@ -264,7 +275,8 @@ class FacetSurface:
         X, A, B, phi, ca, cb = self._coefficients(tri, theta)
         return SlaveFrames(self.slot[tri], X, A, B, phi, ca, cb, np.asarray(w, float).copy())
 
-    def evaluate(self, u: np.ndarray, piece: np.ndarray, theta: np.ndarray) -> MasterPoints:
+    def evaluate(self, u: np.ndarray, piece: np.ndarray, theta: np.ndarray, second: bool = True) -> MasterPoints:
+        """The current (flat) master triangles at ``(piece, theta)``; ``s`` is zero."""
         X, A, B, phi, ca, cb = self._coefficients(piece, theta)
         U = element_values(self.space, u, self.slot[piece])
         x = X + np.einsum("pa,pak->pk", phi, U)
