@@ -41,8 +41,9 @@ from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface, RayHits, elemen
 
 #: switches of one point's active status in one increment before its tangent is held active
 MAX_SWITCHES = 4
-#: largest |gap| searched, in slave element sizes
-MAX_GAP_H = 2.0
+#: largest |gap| searched, in element sizes: a point is active only while
+#: p_N + (kappa E / h) g <= 0, i.e. for gaps below |p_N| h / (kappa E), far below h
+MAX_GAP_H = 1.0
 #: a gap below this fraction of h counts as closed when the active set is decided (initially
 #: touching surfaces, round-off of the facet intersections); lambda_N itself is unchanged
 CLOSED_GAP_H = 1e-9

@@ -33,11 +33,12 @@ from cgfem.embedding.partition import SurfaceQuadrature
 from cgfem.fem.space import NODE_XI, Space, shape_functions
 from cgfem.geometry.solid import Solid
 
-#: Newton iterations of the NURBS+FE ray tracing, and its tolerance (fraction of h)
-MAX_RAY_NEWTON = 30
+#: Newton iterations of the NURBS+FE ray tracing (from a seed within about h of the hit it
+#: converges quadratically in a few), and its tolerance (fraction of h)
+MAX_RAY_NEWTON = 12
 RAY_TOL = 1e-12
 #: candidates (nearest seeds) tried per slave point
-CANDIDATES = 6
+CANDIDATES = 4
 #: barycentric tolerance of a facet hit
 FACET_TOL = 1e-10
 
@@ -108,6 +109,10 @@ class NurbsFeSurface:
         self.seed_theta = surface.uv[keep]
         self._seed_slot, self._seed_xi = _locate(space, surface.x[keep], -surface.normal[keep])
         self.h = space.h
+        seeds = surface.x[keep]
+        #: the largest distance from a seed to its nearest neighbour (about the distance from
+        #: any surface point to its nearest seed)
+        self.spacing = float(cKDTree(seeds).query(seeds, k=2)[0][:, 1].max()) if seeds.shape[0] > 1 else self.h
 
     # -- slave side ----------------------------------------------------------------------
     def slave_frames(self, rule: SurfaceQuadrature) -> SlaveFrames:
@@ -161,26 +166,37 @@ class NurbsFeSurface:
         n = x1.shape[0]
         best = RayHits(np.zeros(n, bool), np.zeros(n, np.int64), np.zeros((n, 2)), np.full(n, np.inf))
         seeds_x = self._seed_positions(u)
-        k = min(CANDIDATES, seeds_x.shape[0])
         tree = cKDTree(seeds_x)
-        dist, near = tree.query(x1, k=k)
-        near, dist = near.reshape(n, k), dist.reshape(n, k)
-        # a hit within max_gap lies within max_gap of x1, and every point of the surface
-        # has a seed within about one element: farther points cannot hit
-        unresolved = dist[:, 0] <= max_gap + 2.0 * self.h
+        # the hit's nearest seed lies within the seeds' spacing of the ray: sample the ray
+        # segment |g| <= max_gap at that spacing, keep the seeds nearest to the samples, and
+        # start from those closest to the ray (none close: no hit possible)
+        m = int(np.ceil(2.0 * max_gap / self.spacing)) + 1
+        ts = np.linspace(-max_gap, max_gap, m)
+        samples = x1[:, None, :] + ts[None, :, None] * n1[:, None, :]
+        _, idx = tree.query(samples.reshape(-1, 3))
+        idx = idx.reshape(n, m)
+        v = seeds_x[idx] - x1[:, None, :]
+        off_ray = np.linalg.norm(v - np.einsum("pjk,pk->pj", v, n1)[:, :, None] * n1[:, None, :], axis=2)
+        order = np.argsort(off_ray, axis=1, kind="stable")
+        near = np.take_along_axis(idx, order, axis=1)
+        close = np.take_along_axis(off_ray, order, axis=1) <= 2.0 * self.spacing
+        unresolved = close[:, 0].copy()
         if previous is not None and np.any(previous.found):
             # the previous pairing first: if it is still an admissible hit, it stays
             rows = np.flatnonzero(previous.found)
             self._try(u, x1, n1, max_gap, rows, previous.piece[rows], previous.theta[rows], best)
-            unresolved = ~best.found
-        for c in range(k):
-            rows = np.flatnonzero(unresolved)
-            if rows.size == 0:
-                break
+            unresolved &= ~best.found
+        tried = np.full((n, 0), -1)
+        for c in range(min(m, 4 * CANDIDATES)):
+            rows = np.flatnonzero(unresolved & close[:, c] & np.all(tried != near[:, c:c + 1], axis=1))
+            tried = np.concatenate([tried, near[:, c:c + 1]], axis=1)
+            if rows.size == 0 or tried.shape[1] > CANDIDATES and not np.any(unresolved):
+                continue
+            seeds = near[rows, c]
             # further seeds matter: a patch may close on itself (a seam), where Newton from
             # one side stops at the domain's edge while the hit lies just across
-            seeds = near[rows, c]
             self._try(u, x1, n1, max_gap, rows, self.seed_piece[seeds], self.seed_theta[seeds], best)
+            unresolved &= ~best.found
         return best
 
     def _try(self, u, x1, n1, max_gap, rows, piece, theta, best: RayHits) -> None:
