@@ -115,8 +115,11 @@ def point_gradients(connectivity, u, xi, offsets, h):
 
 
 @njit(cache=True)
-def integrate_force(connectivity, P, xi, w, offsets, h, r):
-    """``r[3a+i] += sum_p w_p P[p, i, J] dN_a/dX_J`` (internal force)."""
+def _integrate_vector(connectivity, P, values, xi, w, offsets, h, r):
+    """``r[3a+i] += sum_p w_p (P[p, i, J] dN_a/dX_J + N_a values[p, i])``; either array may
+    be empty (0 rows) and is then left out."""
+    use_P = P.shape[0] > 0
+    use_values = values.shape[0] > 0
     N = np.empty(8)
     dN = np.empty((8, 3))
     for e in range(offsets.size - 1):
@@ -125,8 +128,18 @@ def integrate_force(connectivity, P, xi, w, offsets, h, r):
             for a in range(8):
                 base = 3 * connectivity[e, a]
                 for i in range(3):
-                    r[base + i] += w[p] * (P[p, i, 0] * dN[a, 0] + P[p, i, 1] * dN[a, 1]
-                                           + P[p, i, 2] * dN[a, 2])
+                    f = 0.0
+                    if use_P:
+                        f += P[p, i, 0] * dN[a, 0] + P[p, i, 1] * dN[a, 1] + P[p, i, 2] * dN[a, 2]
+                    if use_values:
+                        f += N[a] * values[p, i]
+                    r[base + i] += w[p] * f
+
+
+@njit(cache=True)
+def integrate_force(connectivity, P, xi, w, offsets, h, r):
+    """``r[3a+i] += sum_p w_p P[p, i, J] dN_a/dX_J`` (internal force)."""
+    _integrate_vector(connectivity, P, np.empty((0, 3)), xi, w, offsets, h, r)
 
 
 @njit(cache=True, parallel=True)
@@ -196,15 +209,7 @@ def integrate_mass(xi, w, offsets, h, components, elements, scatter, data):
 @njit(cache=True)
 def integrate_load(connectivity, values, xi, w, offsets, h, r):
     """``r[3a+i] += sum_p w_p N_a values[p, i]`` (tractions, body forces, multipliers)."""
-    N = np.empty(8)
-    dN = np.empty((8, 3))
-    for e in range(offsets.size - 1):
-        for p in range(offsets[e], offsets[e + 1]):
-            basis(xi[p], h, N, dN)
-            for a in range(8):
-                base = 3 * connectivity[e, a]
-                for i in range(3):
-                    r[base + i] += w[p] * N[a] * values[p, i]
+    _integrate_vector(connectivity, np.empty((0, 3, 3)), values, xi, w, offsets, h, r)
 
 
 @njit(cache=True, parallel=True)
