@@ -63,24 +63,13 @@ def element_values(space: Space, u: np.ndarray, slots: np.ndarray) -> np.ndarray
     return u.reshape(-1, 3)[space.connectivity[slots]]
 
 
-def _locate(space: Space, x: np.ndarray, inward: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Active element (n,) and local coordinates (n, 3) of surface points ``x``; a point on a
-    grid plane goes to the element on the material side (``inward`` (n, 3))."""
-    probe = x + 1e-9 * space.h * inward
-    grid = space.grid
-    slots = space.slot(grid.element_id(grid.element_of_points(probe)))
-    bad = slots < 0
-    if np.any(bad):     # round-off on a plane: try the six face neighbours
-        ijk0 = grid.element_of_points(probe[bad])
-        found = np.full(ijk0.shape[0], -1)
-        for d in np.vstack([np.eye(3, dtype=np.int64), -np.eye(3, dtype=np.int64)]):
-            ijk = np.clip(ijk0 + d, 0, np.asarray(grid.shape) - 1)
-            s = space.slot(grid.element_id(ijk))
-            found = np.where(found < 0, s, found)
-        slots = slots.copy()
-        slots[bad] = found
-    centre = space.centres()[np.maximum(slots, 0)]
-    return slots, (x - centre) / (0.5 * space.h)
+def _locate(space: Space, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Active element (n,) and local coordinates (n, 3) of surface points ``x`` (n, 3);
+    every point of the boundary lies in a cut element, so none may be missing."""
+    slots, xi = space.locate(np.ascontiguousarray(x, dtype=float))
+    if np.any(slots < 0):
+        raise ValueError(f"{int(np.sum(slots < 0))} surface points outside the active elements")
+    return slots, xi
 
 
 @dataclass(frozen=True)
@@ -107,7 +96,7 @@ class NurbsFeSurface:
         keep = np.isin(surface.patch, self.patches)
         self.seed_piece = surface.patch[keep]
         self.seed_theta = surface.uv[keep]
-        self._seed_slot, self._seed_xi = _locate(space, surface.x[keep], -surface.normal[keep])
+        self._seed_slot, self._seed_xi = _locate(space, surface.x[keep])
         self.h = space.h
         seeds = surface.x[keep]
         #: the largest distance from a seed to its nearest neighbour (about the distance from
@@ -123,7 +112,7 @@ class NurbsFeSurface:
             rows = rule.patch == pid
             d = self.solid.patches[pid].surface.derivatives(rule.uv[rows], 1)
             A[rows], B[rows] = d[:, 1, 0], d[:, 0, 1]
-        slots, xi = _locate(self.space, rule.x, -rule.normal)
+        slots, xi = _locate(self.space, rule.x)
         N, dN, _ = shape_derivatives(xi, self.h)
         ca = np.einsum("paj,pj->pa", dN, A)
         cb = np.einsum("paj,pj->pa", dN, B)
@@ -143,8 +132,7 @@ class NurbsFeSurface:
             uv = np.column_stack([np.clip(theta[rows, 0], u0, u1), np.clip(theta[rows, 1], v0, v1)])
             Q[rows, :order + 1, :order + 1] = srf.derivatives(uv, order)
         X, Qt = Q[:, 0, 0], np.stack([Q[:, 1, 0], Q[:, 0, 1]], axis=1)
-        normal0 = np.cross(Qt[:, 0], Qt[:, 1])
-        slots, xi = _locate(self.space, X, -normal0)
+        slots, xi = _locate(self.space, X)
         N, dN, d2N = shape_derivatives(xi, self.h)
         U = element_values(self.space, u, np.maximum(slots, 0))
         psi = np.einsum("paj,pcj->pca", dN, Qt)                     # dN . Q_alpha  (n, 2, 8)
