@@ -40,7 +40,7 @@ from cgfem.contact.kinematics import SlaveFrames, gap_derivatives, slave_state
 from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface, RayHits, element_values, shape_derivatives
 
 #: switches of one point's active status in one increment before its tangent is held active
-MAX_SWITCHES = 4
+MAX_SWITCHES = 10
 #: largest |gap| searched, in element sizes: a point is active only while
 #: p_N + (kappa E / h) g <= 0, i.e. for gaps below |p_N| h / (kappa E), far below h
 MAX_GAP_H = 1.0
