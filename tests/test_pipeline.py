@@ -51,14 +51,45 @@ def test_smoke_plan_has_every_rule_once_per_job(workdir):
     n_planar = len(config["examples"]["planar"]["levels"]) * len(config["surfaces"])
     assert jobs == {"all": 1, "check_case": 4, "run_case": expected_runs(config), "planar_reference": 1,
                     "planar_errors": n_planar, "claims": 1, **{f: 1 for f in FIGURES}}
-    assert expected_runs(config) == 15
+    assert expected_runs(config) == 10                  # 5 example levels x (facets, nurbs_fe)
 
 
 def test_full_plan_runs_every_example_level_and_definition(workdir):
     config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
     jobs = planned_jobs(workdir)
-    assert jobs["run_case"] == expected_runs(config) == 45
-    assert jobs["planar_errors"] == 12
+    assert jobs["run_case"] == expected_runs(config) == 30     # 15 example levels x 2
+    assert jobs["planar_errors"] == 8
+
+
+def planned_runs(root: Path, *args: str, target: str | None = None) -> set[str]:
+    """Run folders (results/runs/{case}/L{level}_{surface}) of the jobs a dry run of
+    ``target`` (default: all) plans; ``args`` last (``--configfile`` takes every word after it)."""
+    done = snakemake(root, "-n", "--forceall", *([target] if target else []), *args)
+    assert done.returncode == 0, done.stderr + done.stdout
+    return set(re.findall(r"results/runs/\w+/L\d+_\w+(?=/summary\.json)", done.stdout + done.stderr))
+
+
+@pytest.mark.parametrize("configfile", [None, "config/smoke.yaml"])
+def test_only_implemented_definitions_are_planned(workdir, configfile):
+    """nurbs_fit refuses cases with contact (exit 2) until it is implemented: no job asks for
+    it, and fig10 compares facets with nurbs_fe meanwhile."""
+    args = ("--configfile", configfile) if configfile else ()
+    runs = planned_runs(workdir, *args)
+    assert {re.search(r"/L\d+_(\w+)$", path)[1] for path in runs} == {"facets", "nurbs_fe"}
+    config = yaml.safe_load((REPO / (configfile or "config/config.yaml")).read_text())
+    assert len(runs) == expected_runs(config)
+    level = config["figures"]["fig10"]["level"]
+    fig10 = planned_runs(workdir, *args, target="paper_figures/fig10.png")
+    assert fig10 == {f"results/runs/planar/L{level}_facets", f"results/runs/planar/L{level}_nurbs_fe"}
+
+
+def test_nurbs_fit_stays_allowed_by_the_schema(workdir, tmp_path):
+    """Planning nurbs_fit again is one line of the config: fig10 then compares it with facets."""
+    extra = tmp_path / "fit.yaml"
+    extra.write_text("surfaces: [facets, nurbs_fe, nurbs_fit]\n")
+    level = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["figures"]["fig10"]["level"]
+    fig10 = planned_runs(workdir, "--configfile", str(extra), target="paper_figures/fig10.png")
+    assert fig10 == {f"results/runs/planar/L{level}_facets", f"results/runs/planar/L{level}_nurbs_fit"}
 
 
 def test_lint_is_clean(workdir):

@@ -1,7 +1,7 @@
 # One rule per figure: the inputs are result files only; drawing is cgfem.report's.
 
 rule fig09:
-    """Fig. 9: relative energy-norm error vs DOFs, planar, the three definitions."""
+    """Fig. 9: relative energy-norm error vs DOFs, planar, every configured definition."""
     input:
         planar_error_tables(),
     output:
@@ -20,9 +20,10 @@ rule fig09:
         "../scripts/figure.py"
 
 rule fig10:
-    """Fig. 10: u_z along a line across the top surface of the lower block."""
+    """Fig. 10: u_z along a line across the top surface of the lower block, facets against
+    nurbs_fit (nurbs_fe until nurbs_fit is run)."""
     input:
-        summaries("planar", surfaces=["facets", "nurbs_fit"], levels=[config["figures"]["fig10"]["level"]]),
+        summaries("planar", surfaces=fig10_surfaces(), levels=[config["figures"]["fig10"]["level"]]),
     output:
         png=report(
             "paper_figures/fig10.png", caption="../report/fig10.rst", category="Paper"

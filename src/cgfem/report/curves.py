@@ -9,21 +9,24 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from cgfem.report.runs import BODY, DISPLACEMENT, Run, load_runs
-from cgfem.report.style import FAILED_STYLE, colour, marker, new_figure
+from cgfem.report.style import FAILED_STYLE, OUTER_NOT_CONVERGED_STYLE, colour, marker, new_figure
 
 AXES = {"x": 0, "y": 1, "z": 2}
 
 
 def _style(run: Run) -> dict:
-    """Line style of a run: colour by surface, marker by level, dashed with crosses if failed."""
+    """Line style of a run: colour by surface, marker by level; dashed with crosses if it
+    failed, dotted with hollow markers if its outer loop did not converge."""
     style = {"color": colour(run.surface), "marker": marker(run.level)}
     if run.failed:
         style.update(FAILED_STYLE)
+    elif run.outer_not_converged:
+        style.update(OUTER_NOT_CONVERGED_STYLE)
     return style
 
 
 def _label(run: Run) -> str:
-    return f"{run.label} (failed)" if run.failed else run.label
+    return f"{run.label} ({run.status_note})" if run.status_note else run.label
 
 
 def surface_profile(run: Run, body: str, line: dict[str, float], along: str, component: str,
@@ -61,8 +64,9 @@ def fig10_surface_profile(summaries, body: str, line: dict[str, float], along: s
 
 def fig13_reactions(summaries, pulled: str, clamped: str, component: str = "y") -> Figure:
     """Reaction ``component`` on the pulled and on the clamped caps vs load factor, every run
-    (failed runs dashed, to their last converged step), and the final pulled reaction vs level
-    per definition (converged runs)."""
+    (failed runs dashed, to their last converged step; runs whose outer loop did not converge
+    dotted, hollow markers), and the final pulled reaction vs level per definition (runs that
+    reached the last step; a hollow marker where the outer loop did not converge)."""
     runs = load_runs(summaries)
     c = AXES[component]
     fig, axes = new_figure(1, 3, width=9.0, height=2.9)
@@ -80,6 +84,11 @@ def fig13_reactions(summaries, pulled: str, clamped: str, component: str = "y") 
             continue
         ax.plot([r.level for r in done], [r.reactions(pulled)[-1, c] for r in done], marker="o",
                 color=colour(surface), label=surface)
+        outer = [r for r in done if r.outer_not_converged]
+        if outer:
+            ax.scatter([r.level for r in outer], [r.reactions(pulled)[-1, c] for r in outer],
+                       marker="o", s=30, facecolors="white", edgecolors=colour(surface), zorder=3,
+                       label=f"{surface}: outer loop not converged")
     ax.set(title="final pulled reaction vs level", xlabel="level", ylabel=f"F_{component} (N)")
     ax.legend()
     return fig

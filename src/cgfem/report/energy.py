@@ -95,10 +95,11 @@ def volume_strain(case: Case, run: Run, body_name: str, u: np.ndarray, nodes: np
 
 def energy_errors(case_file: str | Path, run_folder: str | Path, error: BodyError) -> list[ErrorRow]:
     """Energy-norm error of every body of a run at its last step relative to the reference's
-    norm, and of all bodies (body ``TOTAL``); no rows for a run without a converged step."""
+    norm, and of all bodies (body ``TOTAL``); no rows for a failed run (it did not reach the
+    final load the reference solves)."""
     case, run = load_case(case_file), Run.load(run_folder)
     rows: list[ErrorRow] = []
-    if run.n_steps == 0:
+    if run.failed or run.n_steps == 0:
         return rows
     for name, (u, nodes) in nodal_displacements(run).items():
         s = volume_strain(case, run, name, u, nodes)

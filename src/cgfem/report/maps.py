@@ -72,7 +72,7 @@ def _clim(values: list[np.ndarray]) -> tuple[float, float]:
 
 
 def _title(run: Run) -> str:
-    return f"{run.label} (failed at step {run.n_steps + 1})" if run.failed else run.label
+    return f"{run.label} ({run.status_note})" if run.status_note else run.label
 
 
 def _cloud(run: Run, body: str | None = None, warp: bool = True):
@@ -100,12 +100,10 @@ def fig14_stress_maps(summaries, component: tuple[int, int] = (1, 1)) -> Figure:
 
 
 def active_contact_points(run: Run, step: int = -1) -> np.ndarray:
-    """(m, 3) active contact points of a step (warped by their ``displacement`` when the file
-    carries one, i.e. when they are stored at reference positions)."""
+    """(m, 3) active contact points of a step, as stored: ``contact_NNN.vtu`` holds them at
+    their current positions, beside the boundary cloud warped to its current positions."""
     cloud = run.contact_points(step)
     x = np.asarray(cloud.points, float)
-    if DISPLACEMENT in cloud.point_data:
-        x = x + np.asarray(cloud.point_data[DISPLACEMENT], float)
     return x[np.asarray(cloud.point_data[ACTIVE]).ravel() > 0]
 
 

@@ -2,8 +2,9 @@
 report package that knows file and field names, so a rename is a change here alone.
 
 A run folder ``results/runs/{case}/L{level}_{surface}/`` holds ``summary.json``,
-``step_NNN.vtu`` (hexahedra of all bodies), ``surface_NNN.vtu`` (boundary points) and, with
-contact, ``contact_NNN.vtu`` (slave points); ``NNN`` counts converged steps from 1.
+``step_NNN.vtu`` (hexahedra of all bodies), ``surface_NNN.vtu`` (boundary points at their
+reference positions) and, with contact, ``contact_NNN.vtu`` (slave points at their current
+positions); ``NNN`` counts converged steps from 1 (README "Result files").
 """
 
 from __future__ import annotations
@@ -21,16 +22,23 @@ SURFACE_VTU = "surface_{:03d}.vtu"
 CONTACT_VTU = "contact_{:03d}.vtu"
 
 #: point / cell data names of the VTU files
-DISPLACEMENT = "displacement"       # (n, 3)
-STRESS = "stress"                   # (n, 9), Cauchy, row-major
-VON_MISES = "von_mises"             # (n,)
+DISPLACEMENT = "displacement"       # (n, 3), step and surface files
+STRESS = "stress"                   # (n, 9), Cauchy, row-major, step and surface files
+VON_MISES = "von_mises"             # (n,), surface file (the step file has von_mises_nodal)
 BODY = "body"                       # body index, in the order of summary["bodies"]
 PATCH = "patch"                     # patch index within the body
-ACTIVE = "active"                   # contact point active (1) or not (0)
-PRESSURE = "pressure"
+#: point data of contact_NNN.vtu (points at their current positions, never to be warped)
+ACTIVE = "active"                   # (n,) contact point active (1) or not (0)
+PRESSURE = "pressure"               # (n,) lambda_N (Pa), negative in compression
+CONTACT_FORCE = "force"             # (n, 3) force of the master on the slave point (N)
+CONTACT_WEIGHT = "weight"           # (n,) area weight (m^2)
+CONTACT_FIELDS = ("gap", PRESSURE, "p_N", ACTIVE, "normal", CONTACT_WEIGHT, CONTACT_FORCE, "pair")
 
-#: statuses of summary.json
+#: statuses of summary.json: every step solved with the outer loop below outer_tol; every
+#: step solved but the outer loop of at least one stopped at its cap (exit 1); a step failed
+#: after every cut-back, only the converged steps listed (exit 1)
 CONVERGED = "converged"
+OUTER_NOT_CONVERGED = "outer_not_converged"
 FAILED = "failed"
 
 
@@ -65,12 +73,32 @@ class Run:
         return str(self.summary["status"])
 
     @property
+    def converged(self) -> bool:
+        """Every step solved and every outer loop below its tolerance."""
+        return self.status == CONVERGED
+
+    @property
+    def outer_not_converged(self) -> bool:
+        """Every step solved, but the outer loop of at least one step hit its cap."""
+        return self.status == OUTER_NOT_CONVERGED
+
+    @property
     def failed(self) -> bool:
-        return self.status != CONVERGED
+        """The run stopped before the last step (any status but the two above)."""
+        return self.status not in (CONVERGED, OUTER_NOT_CONVERGED)
 
     @property
     def label(self) -> str:
         return f"{self.surface} L{self.level}"
+
+    @property
+    def status_note(self) -> str:
+        """What a figure says of a run that did not converge ("" if it did)."""
+        if self.converged:
+            return ""
+        if self.outer_not_converged:
+            return "outer loop not converged"
+        return f"failed at step {self.n_steps + 1}"
 
     @property
     def steps(self) -> list[dict]:
@@ -122,8 +150,11 @@ class Run:
     def max_von_mises(self, body: str, step: int = -1) -> float:
         return float(self.steps[step]["max_von_mises"][body])
 
-    def contact_force(self, step: int = -1) -> np.ndarray:
-        return np.asarray(self.steps[step]["contact"]["force"], float)
+    def contact_force(self, step: int = -1, pair: str | None = None) -> np.ndarray:
+        """(3,) force (N) the masters exert on the slaves at a step, all pairs or the pair
+        ``"slave/master"``."""
+        contact = self.steps[step]["contact"]
+        return np.asarray((contact if pair is None else contact["pairs"][pair])["force"], float)
 
     def _vtu(self, pattern: str, step: int) -> meshio.Mesh:
         number = self.n_steps + 1 + step if step < 0 else step
@@ -138,6 +169,7 @@ class Run:
         return self._vtu(SURFACE_VTU, step)
 
     def contact_points(self, step: int = -1) -> meshio.Mesh:
+        """The slave points of every pair of a step, at their current positions."""
         return self._vtu(CONTACT_VTU, step)
 
 

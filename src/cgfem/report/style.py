@@ -15,8 +15,10 @@ from matplotlib.figure import Figure  # noqa: E402
 SURFACE_COLOURS = {"facets": "#d95f02", "nurbs_fe": "#1b9e77", "nurbs_fit": "#7570b3"}
 #: marker of each mesh level
 LEVEL_MARKERS = ("o", "s", "^", "D", "v", "P")
-#: line style of a run that failed to converge
+#: line style of a run that failed to converge (stopped before its last step)
 FAILED_STYLE = {"linestyle": "--", "marker": "x"}
+#: line style of a run that reached every step with an outer loop stopped at its cap
+OUTER_NOT_CONVERGED_STYLE = {"linestyle": ":", "markerfacecolor": "white"}
 #: print resolution of the PNG files (dots per inch)
 PRINT_DPI = 300
 
