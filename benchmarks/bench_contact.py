@@ -52,6 +52,20 @@ CASE = ROOT / "config" / "cases" / "chain2_steel.yaml"
 SEED = 20240611
 
 
+def source_state() -> str:
+    """Which contact search is measured: the commit, and whether the working tree's
+    ``contact/`` differs from it (another engineer may be editing it), with a short hash."""
+    import hashlib
+
+    def git(*a):
+        return subprocess.run(["git", *a], cwd=ROOT, capture_output=True, text=True).stdout.strip()
+    files = sorted((ROOT / "src" / "cgfem" / "contact").glob("*.py"))
+    digest = hashlib.sha1(b"".join(f.read_bytes() for f in files)).hexdigest()[:10]
+    dirty = git("status", "--porcelain", "--", "src/cgfem/contact")
+    state = "modified in the working tree: " + ", ".join(l.split(maxsplit=1)[1] for l in dirty.splitlines()) if dirty else "clean"
+    return f"commit {git('rev-parse', '--short', 'HEAD')}, src/cgfem/contact {state} (sha1 of its *.py {digest})"
+
+
 def load() -> str:
     return ", ".join(f"{x:.1f}" for x in os.getloadavg())
 
@@ -296,6 +310,7 @@ class Timers:
     def __init__(self):
         self.seconds: dict[str, float] = {}
         self.calls: dict[str, int] = {}
+        self.first: dict[str, float] = {}            # exclusive time of the first call
         self._stack: list[list[float]] = []          # per open call: [start, time of children]
 
     def wrap(self, category: str, fn):
@@ -307,6 +322,7 @@ class Timers:
                 start, children = self._stack.pop()
                 spent = time.perf_counter() - start
                 self.seconds[category] = self.seconds.get(category, 0.0) + spent - children
+                self.first.setdefault(category, spent - children)
                 self.calls[category] = self.calls.get(category, 0) + 1
                 if self._stack:
                     self._stack[-1][1] += spent
@@ -368,7 +384,7 @@ def part_run(level: int) -> dict:
         summary = json.loads(status.summary.read_text())
     step = summary["steps"][-1] if summary["steps"] else {}
     return {"level": level, "status": status.status, "total_s": total, "seconds": timers.seconds,
-            "calls": timers.calls, "dofs": sum(b["dofs"] for b in summary["bodies"].values()),
+            "calls": timers.calls, "first": timers.first, "dofs": sum(b["dofs"] for b in summary["bodies"].values()),
             "newton": sum(len(r) - 1 for s in summary["steps"] for r in s["pass_residuals"]),
             "passes": sum(s["outer_passes"] for s in summary["steps"]),
             "active": step.get("contact", {}).get("active_points", 0),
@@ -380,11 +396,13 @@ def print_run(r: dict) -> None:
           f"status {r['status']}, {r['dofs']} DOFs, {r['newton']} Newton iterations in {r['passes']} "
           f"outer passes, {r['active']} active contact points; run_case {r['total_s']:.1f} s in a fresh "
           f"process (numba cache loads included)")
-    print(f"{'category':<16} {'s':>8} {'%':>6} {'calls':>6}")
+    print(f"{'category':<16} {'s':>8} {'%':>6} {'calls':>6} {'first call s':>12}")
     seconds = dict(r["seconds"])
     seconds["other"] = r["total_s"] - sum(seconds.values())
     for name, s in sorted(seconds.items(), key=lambda kv: -kv[1]):
-        print(f"{name:<16} {s:8.2f} {100.0 * s / r['total_s']:6.1f} {r['calls'].get(name, ''):>6}")
+        first = r["first"].get(name)
+        print(f"{name:<16} {s:8.2f} {100.0 * s / r['total_s']:6.1f} {r['calls'].get(name, ''):>6} "
+              f"{'' if first is None else f'{first:.2f}':>12}")
     print("exclusive times of wrapped functions: embedding = run.embed_body; model build = BodyModel.build "
           "(space, ghost, pattern, weak Dirichlet, SPR setup); contact setup = run.build_pairs; bulk assembly = "
           "BodyModel.assemble + System.force_scale; stacking + Kc = the rest of System.assemble (block_diag, "
@@ -429,11 +447,12 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--run-level", type=int, default=1)
     parser.add_argument("--quick", action="store_true",
-                        help="20k rays (brute force on 500), part 2 at level 1 once, part 3 at level 0")
+                        help="10k rays (brute force on 300), part 2 at level 1 once, part 3 at level 0")
     args = parser.parse_args()
+    sys.stdout.reconfigure(line_buffering=True)
     if args.quick:
-        args.points, args.brute, args.levels, args.repeat, args.run_level = 20_000, 500, [1], 1, 0
-    print(f"bench_contact: {os.cpu_count()} cores, load average {load()}", flush=True)
+        args.points, args.brute, args.levels, args.repeat, args.run_level = 10_000, 300, [1], 1, 0
+    print(f"bench_contact: {os.cpu_count()} cores, load average {load()}\n{source_state()}", flush=True)
     if "search" in args.parts:
         r = in_child("search", args.search_level, args.points, min(args.brute, args.points))
         if "skipped" in r:
