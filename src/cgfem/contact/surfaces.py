@@ -16,9 +16,11 @@ Master search (ray tracing, eq. 2) lives here too: from each slave point along i
 normal, both ways (the gap is signed), candidates are found with a k-d tree over the
 current positions of dense samples of the master surface (its exact surface-rule points, or
 triangle centroids), so one search costs O(n log n); each candidate is then solved exactly
-(Newton on ``(xi, eta, g)`` for NURBS+FE, starting from the previous pairing when there is
-one; closed form for facets). The nearest admissible hit (master normal opposing the slave
-normal, ``|g| <= max_gap``) is kept.
+(closed form for facets, the nearest admissible hit kept; for NURBS+FE a Newton solve on
+``(xi, eta, g)`` per start in the numba kernel :mod:`cgfem.contact._ray_kernels`, the previous
+pairing first when there is one, the first admissible hit kept). Admissible: the master
+normal opposes the slave normal and ``|g| <= max_gap``. Rays whose segment cannot reach the
+master's element boxes (:meth:`NurbsFeSurface._may_hit`) are skipped.
 """
 
 from __future__ import annotations
@@ -28,9 +30,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from cgfem.contact import _ray_kernels as _rk
 from cgfem.contact.kinematics import MasterPoints, SlaveFrames
 from cgfem.embedding.partition import SurfaceQuadrature
-from cgfem.fem.space import NODE_XI, Space, shape_functions
+from cgfem.fem.space import LOCATE_TOL, NODE_XI, Space, shape_functions
+from cgfem.geometry.nurbs import NurbsSurface
 from cgfem.geometry.solid import Solid
 
 #: Newton iterations of the NURBS+FE ray tracing (from a seed within about h of the hit it
@@ -72,6 +76,22 @@ def _locate(space: Space, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return slots, xi
 
 
+def pack_patches(surfaces: list[NurbsSurface]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """NURBS patches as the flat arrays of :mod:`cgfem.contact._ray_kernels`: ``layout``
+    (n_patches, 6) rows ``(p, q, n_u, n_v, knot offset, control offset)``, ``knots`` (each
+    patch's ``knots_u`` then ``knots_v``) and ``control`` (the homogeneous nets, raveled)."""
+    layout = np.zeros((len(surfaces), 6), np.int64)
+    ko = co = 0
+    for k, s in enumerate(surfaces):
+        nu, nv = s.control.shape[:2]
+        layout[k] = (*s.degree, nu, nv, ko, co)
+        ko += s.knots_u.size + s.knots_v.size
+        co += s.control.size
+    knots = np.concatenate([np.concatenate([s.knots_u, s.knots_v]) for s in surfaces])
+    control = np.concatenate([s.control.ravel() for s in surfaces])
+    return layout, knots, control
+
+
 @dataclass(frozen=True)
 class RayHits:
     """Result of a search: ``found`` (n,) bool, ``piece`` (n,) patch or triangle, ``theta``
@@ -102,6 +122,14 @@ class NurbsFeSurface:
         #: the largest distance from a seed to its nearest neighbour (about the distance from
         #: any surface point to its nearest seed)
         self.spacing = float(cKDTree(seeds).query(seeds, k=2)[0][:, 1].max()) if seeds.shape[0] > 1 else self.h
+        # reference positions (n_seeds, 3) and shape functions (n_seeds, 8) of the seeds
+        self._seed_X = np.empty((self.seed_piece.size, 3))
+        for pid in np.unique(self.seed_piece):
+            rows = self.seed_piece == pid
+            self._seed_X[rows] = solid.patches[pid].surface.evaluate(self.seed_theta[rows])
+        self._seed_N = shape_derivatives(self._seed_xi, self.h)[0]
+        self._centres = space.centres()
+        self._layout, self._knots, self._control = pack_patches([p.surface for p in solid.patches])
 
     # -- slave side ----------------------------------------------------------------------
     def slave_frames(self, rule: SurfaceQuadrature) -> SlaveFrames:
@@ -150,101 +178,92 @@ class NurbsFeSurface:
 
     def search(self, u: np.ndarray, x1: np.ndarray, n1: np.ndarray, max_gap: float,
                previous: RayHits | None = None) -> RayHits:
-        """Ray tracing from ``x1`` along ``n1`` (n, 3) to the current master surface."""
+        """Ray tracing from ``x1`` along ``n1`` (n, 3) to the current master surface, the
+        segment ``|g| <= max_gap`` of each ray. Starts, in order: the previous pairing (if
+        found), then the seeds nearest to samples of the segment taken at the seeds' spacing,
+        nearest to the ray first (those within twice the spacing of it, each seed once, from
+        the first ``4 CANDIDATES`` samples' seeds); a ray no seed lies near has none. The first
+        admissible hit of a point is kept (:func:`cgfem.contact._ray_kernels.trace`)."""
         n = x1.shape[0]
         best = RayHits(np.zeros(n, bool), np.zeros(n, np.int64), np.zeros((n, 2)), np.full(n, np.inf))
+        rows = np.flatnonzero(self._may_hit(u, x1, max_gap))
+        if rows.size == 0:
+            return best
+        x1, n1 = np.ascontiguousarray(x1[rows], dtype=float), np.ascontiguousarray(n1[rows], dtype=float)
+        piece, theta = self._starts(u, x1, n1, max_gap)
+        if previous is not None:
+            prev = previous.found[rows]
+            piece = np.concatenate([np.where(prev, previous.piece[rows], -1)[:, None], piece], axis=1)
+            theta = np.concatenate([previous.theta[rows][:, None], theta], axis=1)
+            # a point without a previous pairing starts from the seeds: shift them left
+            order = np.argsort(piece < 0, axis=1, kind="stable")
+            piece = np.take_along_axis(piece, order, axis=1)
+            theta = np.take_along_axis(theta, order[:, :, None], axis=1)
+        found, pc, th, g = np.zeros(rows.size, bool), np.zeros(rows.size, np.int64), np.zeros((rows.size, 2)), \
+            np.full(rows.size, np.inf)
+        status = np.zeros(rows.size, np.int64)
+        grid = self.space.grid
+        _rk.trace(x1, n1, np.ascontiguousarray(piece), np.ascontiguousarray(theta), float(max_gap), RAY_TOL,
+                  MAX_RAY_NEWTON, self._layout, self._knots, self._control, np.asarray(grid.origin, float),
+                  float(self.h), np.asarray(grid.shape, np.int64), self.space.elements, LOCATE_TOL,
+                  self.space.connectivity, np.ascontiguousarray(u, dtype=float).reshape(-1, 3),
+                  found, pc, th, g, status)
+        if np.any(status == _rk.OUTSIDE):
+            raise ValueError(f"{int(np.sum(status == _rk.OUTSIDE))} surface points outside the active elements")
+        best.found[rows], best.piece[rows], best.theta[rows], best.g[rows] = found, pc, th, g
+        return best
+
+    def _may_hit(self, u: np.ndarray, x1: np.ndarray, max_gap: float) -> np.ndarray:
+        """(n,) bool: the ray segment ``|g| <= max_gap`` from ``x1`` (n, 3) may meet the
+        master. A master point ``x = Q + N . U2`` of element ``e`` lies in the box of the
+        element's cube moved by the range of its nodal displacements (``N >= 0`` sums to 1),
+        so a segment whose midpoint is farther than ``max_gap`` plus that box's
+        circumradius (and a margin for the locator's tolerance) from every box centre has no
+        hit; its points are skipped."""
+        U = u.reshape(-1, 3)[self.space.connectivity]                  # (n_el, 8, 3)
+        lo, hi = U.min(axis=1), U.max(axis=1)
+        centre = self._centres + 0.5 * (lo + hi)
+        radius = np.linalg.norm(0.5 * self.h + 0.5 * (hi - lo), axis=1).max()
+        reach = max_gap + radius + 1e-6 * self.h
+        dist, _ = cKDTree(centre).query(x1, distance_upper_bound=reach)
+        return dist <= reach
+
+    def _starts(self, u: np.ndarray, x1: np.ndarray, n1: np.ndarray, max_gap: float
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """Seed starts of rays ``x1``, ``n1`` (n, 3): patches (n, k) (-1 past the last) and
+        parameters (n, k, 2), nearest to the ray first. The hit's nearest seed lies within
+        the seeds' spacing of the ray: the segment is sampled at that spacing, the seeds
+        nearest to the samples are sorted by their distance to the ray, and those within
+        twice the spacing start Newton (none: no hit possible). Further seeds matter: a
+        patch may close on itself (a seam), where Newton from one side stops at the domain's
+        edge while the hit lies just across."""
+        n = x1.shape[0]
         seeds_x = self._seed_positions(u)
-        tree = cKDTree(seeds_x)
-        # the hit's nearest seed lies within the seeds' spacing of the ray: sample the ray
-        # segment |g| <= max_gap at that spacing, keep the seeds nearest to the samples, and
-        # start from those closest to the ray (none close: no hit possible)
         m = int(np.ceil(2.0 * max_gap / self.spacing)) + 1
         ts = np.linspace(-max_gap, max_gap, m)
         samples = x1[:, None, :] + ts[None, :, None] * n1[:, None, :]
+        # sliding-midpoint splits: a median-split tree over points on a surface queried from
+        # off the surface is several times slower (the nearest seed is the same)
+        tree = cKDTree(seeds_x, leafsize=32, balanced_tree=False, compact_nodes=False)
         _, idx = tree.query(samples.reshape(-1, 3))
         idx = idx.reshape(n, m)
         v = seeds_x[idx] - x1[:, None, :]
         off_ray = np.linalg.norm(v - np.einsum("pjk,pk->pj", v, n1)[:, :, None] * n1[:, None, :], axis=2)
-        order = np.argsort(off_ray, axis=1, kind="stable")
+        order = np.argsort(off_ray, axis=1, kind="stable")[:, :min(m, 4 * CANDIDATES)]
         near = np.take_along_axis(idx, order, axis=1)
-        close = np.take_along_axis(off_ray, order, axis=1) <= 2.0 * self.spacing
-        unresolved = close[:, 0].copy()
-        if previous is not None and np.any(previous.found):
-            # the previous pairing first: if it is still an admissible hit, it stays
-            rows = np.flatnonzero(previous.found)
-            self._try(u, x1, n1, max_gap, rows, previous.piece[rows], previous.theta[rows], best)
-            unresolved &= ~best.found
-        tried = np.full((n, 0), -1)
-        for c in range(min(m, 4 * CANDIDATES)):
-            rows = np.flatnonzero(unresolved & close[:, c] & np.all(tried != near[:, c:c + 1], axis=1))
-            tried = np.concatenate([tried, near[:, c:c + 1]], axis=1)
-            if rows.size == 0 or tried.shape[1] > CANDIDATES and not np.any(unresolved):
-                continue
-            seeds = near[rows, c]
-            # further seeds matter: a patch may close on itself (a seam), where Newton from
-            # one side stops at the domain's edge while the hit lies just across
-            self._try(u, x1, n1, max_gap, rows, self.seed_piece[seeds], self.seed_theta[seeds], best)
-            unresolved &= ~best.found
-        return best
-
-    def _try(self, u, x1, n1, max_gap, rows, piece, theta, best: RayHits) -> None:
-        """Ray Newton for points ``rows`` from ``(piece, theta)``; admissible hits nearer
-        than the best so far replace it (in place)."""
-        ok, th, g = self._ray_newton(u, x1[rows], n1[rows], piece, theta.copy(), max_gap)
-        admissible = ok & (np.abs(g) <= max_gap)
-        if np.any(admissible):
-            mp = self.evaluate(u, piece, th, second=False)
-            admissible &= np.einsum("pk,pk->p", mp.normal, n1[rows]) < 0.0
-        better = admissible & (np.abs(g) < np.abs(best.g[rows]) - 1e-14 * self.h)
-        r = rows[better]
-        best.found[r] = True
-        best.piece[r] = piece[better]
-        best.theta[r] = th[better]
-        best.g[r] = g[better]
+        use = np.take_along_axis(off_ray, order, axis=1) <= 2.0 * self.spacing
+        for c in range(1, near.shape[1]):                                # each seed once
+            use[:, c] &= np.all(near[:, :c] != near[:, c:c + 1], axis=1)
+        # the used seeds first, in their order
+        keep = np.argsort(~use, axis=1, kind="stable")
+        near = np.take_along_axis(near, keep, axis=1)
+        use = np.take_along_axis(use, keep, axis=1)
+        return np.where(use, self.seed_piece[near], -1), self.seed_theta[near]
 
     def _seed_positions(self, u: np.ndarray) -> np.ndarray:
-        N, _, _ = shape_derivatives(self._seed_xi, self.h)
+        """Current positions (n_seeds, 3) of the seeds."""
         U = element_values(self.space, u, self._seed_slot)
-        X = np.empty((self.seed_piece.size, 3))
-        for pid in np.unique(self.seed_piece):
-            rows = self.seed_piece == pid
-            X[rows] = self.solid.patches[pid].surface.evaluate(self.seed_theta[rows])
-        return X + np.einsum("pa,pak->pk", N, U)
-
-    def _ray_newton(self, u, x1, n1, piece, theta, max_gap):
-        """Newton on ``x2(theta) - x1 - g n1 = 0`` for ``(theta, g)``; converged (n,), theta, g."""
-        n = x1.shape[0]
-        g = np.zeros(n)
-        ok = np.zeros(n, bool)
-        active = np.arange(n)
-        lo = np.array([[self.solid.patches[p].surface.domain[0][0], self.solid.patches[p].surface.domain[1][0]]
-                       for p in range(len(self.solid.patches))])
-        hi = np.array([[self.solid.patches[p].surface.domain[0][1], self.solid.patches[p].surface.domain[1][1]]
-                       for p in range(len(self.solid.patches))])
-        for _ in range(MAX_RAY_NEWTON):
-            if active.size == 0:
-                break
-            mp = self.evaluate(u, piece[active], theta[active], second=False)
-            F = mp.x - x1[active] - g[active, None] * n1[active]
-            J = np.stack([mp.t[:, 0], mp.t[:, 1], -n1[active]], axis=2)
-            det_ok = np.abs(np.linalg.det(J)) > 1e-300
-            step = np.zeros((active.size, 3))
-            step[det_ok] = -np.linalg.solve(J[det_ok], F[det_ok][..., None])[..., 0]
-            done = np.linalg.norm(F, axis=1) <= RAY_TOL * self.h
-            ok[active[done]] = True
-            # a ray that runs far beyond the search distance is no hit from this start
-            go = ~done & det_ok & (np.abs(g[active]) <= 4.0 * max_gap)
-            idx = active[go]
-            theta[idx] += step[go, :2]
-            g[idx] += step[go, 2]
-            pl, ph = lo[piece[idx]], hi[piece[idx]]
-            # a step that leaves the patch's domain is cut back onto it; a point that stays
-            # outside is no hit on this patch (a neighbouring patch's seed finds it)
-            clipped = np.clip(theta[idx], pl, ph)
-            stuck = np.all(clipped == theta[idx] - step[go, :2], axis=1) & np.any(clipped != theta[idx], axis=1)
-            theta[idx] = clipped
-            active = idx[~stuck]
-        return ok, theta, g
+        return self._seed_X + np.einsum("pa,pak->pk", self._seed_N, U)
 
 
 class FacetSurface:

@@ -1,0 +1,191 @@
+"""Numba kernels of the NURBS+FE ray tracing (:class:`cgfem.contact.surfaces.NurbsFeSurface`).
+
+The current master surface is ``x2(theta) = Q(theta) + N(zeta(Q)) . U2`` (eq. 16): ``Q`` a
+NURBS patch, ``N`` the H8 shape functions of the grid element holding ``Q`` and ``U2`` its
+nodal displacements. Per slave point ``(x1, n1)`` a Newton solve of
+``F = x2(theta) - x1 - g n1 = 0`` on ``(xi, eta, g)`` runs from each start in turn; the first
+admissible hit (converged, ``|g| <= max_gap``, master normal against ``n1``) is kept.
+
+Flat data (all contiguous):
+
+- ``layout`` (n_patches, 6) int64 rows ``(p, q, n_u, n_v, knot offset, control offset)``:
+  patch ``k``'s ``knots_u`` are ``knots[o : o + n_u + p + 1]``, its ``knots_v`` follow them,
+  and its homogeneous control net (n_u, n_v, 4) is ``control[c : c + 4 n_u n_v]``;
+- the grid of the master space: ``origin`` (3,), ``h``, ``shape`` (3,) elements per axis,
+  ``elements`` ascending grid ids of the active elements, ``connectivity`` (n_el, 8) and the
+  nodal displacements ``u`` (n_nodes, 3);
+- starts: ``start_piece`` (n, k) patch, ``start_theta`` (n, k, 2), tried in column order up
+  to the first ``start_piece < 0``.
+
+NURBS evaluation is :func:`cgfem.geometry._nurbs_kernels.surface_derivs`, the grid element
+:func:`cgfem.fem._element_kernels.locate`, the H8 basis :func:`~cgfem.fem._element_kernels.basis`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from cgfem.fem._element_kernels import basis, locate
+from cgfem.geometry._nurbs_kernels import surface_derivs
+
+#: ``trace`` status of a point: a Newton iterate's ``Q`` lay in no active element
+OUTSIDE = 1
+
+
+@njit(cache=True)
+def patch_derivs(k, uu, vv, layout, knots, control, SKL):
+    """First derivatives of patch ``k`` at ``(uu, vv)`` into ``SKL`` (2, 2, 3)."""
+    p, q, nu, nv, ko, co = layout[k, 0], layout[k, 1], layout[k, 2], layout[k, 3], layout[k, 4], layout[k, 5]
+    U = knots[ko:ko + nu + p + 1]
+    V = knots[ko + nu + p + 1:ko + nu + p + 1 + nv + q + 1]
+    Pw = control[co:co + 4 * nu * nv].reshape((nu, nv, 4))
+    surface_derivs(p, q, U, V, Pw, uu, vv, 1, SKL)
+
+
+@njit(cache=True)
+def master_point(k, uu, vv, layout, knots, control, origin, h, shape, elements, tol, connectivity, u,
+                 x, t):
+    """Current master point ``x`` (3,) and tangents ``t`` (2, 3) at ``(uu, vv)`` of patch ``k``
+    (eq. 16): ``x = Q + N . U2``, ``t_alpha = Q_alpha + (grad N . Q_alpha) . U2``. Returns
+    the master element's slot (-1: ``Q`` in no active element; ``x``, ``t`` then unset)."""
+    SKL = np.empty((2, 2, 3))
+    patch_derivs(k, uu, vv, layout, knots, control, SKL)
+    Q = np.empty((1, 3))
+    for c in range(3):
+        Q[0, c] = SKL[0, 0, c]
+    slot = np.empty(1, np.int64)
+    xi = np.empty((1, 3))
+    locate(Q, origin, h, shape, elements, tol, slot, xi)
+    e = slot[0]
+    if e < 0:
+        return e
+    N = np.empty(8)
+    dN = np.empty((8, 3))
+    basis(xi[0], h, N, dN)
+    for c in range(3):
+        x[c] = SKL[0, 0, c]
+        t[0, c] = SKL[1, 0, c]
+        t[1, c] = SKL[0, 1, c]
+    for a in range(8):
+        node = connectivity[e, a]
+        psi0 = dN[a, 0] * SKL[1, 0, 0] + dN[a, 1] * SKL[1, 0, 1] + dN[a, 2] * SKL[1, 0, 2]
+        psi1 = dN[a, 0] * SKL[0, 1, 0] + dN[a, 1] * SKL[0, 1, 1] + dN[a, 2] * SKL[0, 1, 2]
+        for c in range(3):
+            x[c] += N[a] * u[node, c]
+            t[0, c] += psi0 * u[node, c]
+            t[1, c] += psi1 * u[node, c]
+    return e
+
+
+@njit(cache=True)
+def solve3(J, F, step):
+    """``step = -J^{-1} F`` for ``J`` (3, 3) by Gaussian elimination with partial pivoting
+    (``J`` is overwritten). Returns False, leaving ``step`` unset, if ``|det J| <= 1e-300``."""
+    b = np.empty(3)
+    for i in range(3):
+        b[i] = -F[i]
+    det = 1.0
+    for c in range(3):
+        piv = c
+        for r in range(c + 1, 3):
+            if abs(J[r, c]) > abs(J[piv, c]):
+                piv = r
+        if piv != c:
+            det = -det
+            for j in range(3):
+                J[c, j], J[piv, j] = J[piv, j], J[c, j]
+            b[c], b[piv] = b[piv], b[c]
+        det *= J[c, c]
+        if J[c, c] == 0.0:
+            return False
+        for r in range(c + 1, 3):
+            f = J[r, c] / J[c, c]
+            for j in range(c, 3):
+                J[r, j] -= f * J[c, j]
+            b[r] -= f * b[c]
+    if not abs(det) > 1e-300:
+        return False
+    for i in range(2, -1, -1):
+        s = b[i]
+        for j in range(i + 1, 3):
+            s -= J[i, j] * step[j]
+        step[i] = s / J[i, i]
+    return True
+
+
+@njit(cache=True)
+def ray_newton(x1, n1, k, u0, v0, max_gap, ray_tol, max_iter, layout, knots, control, origin, h, shape,
+               elements, tol, connectivity, u, out):
+    """Newton on ``x2(theta) - x1 - g n1 = 0`` from ``(u0, v0)`` on patch ``k``, ``g = 0``;
+    a step leaving the patch's domain is clipped onto it, and a clipped step that does not
+    move is a stuck one. Stops converged (``|F| <= ray_tol h``), on a singular ``J``, a
+    stuck step, ``|g| > 4 max_gap`` or after ``max_iter`` iterations. ``out`` (3,) receives
+    ``(xi, eta, g)``. Returns 1 converged with ``m2 . n1 < 0`` (``m2 = t_xi x t_eta``, the
+    master normal against the ray), 0 not, ``-1 - OUTSIDE`` if an iterate left the active
+    elements."""
+    kl = layout[k]
+    U = knots[kl[4]:kl[4] + kl[2] + kl[0] + 1]
+    V = knots[kl[4] + kl[2] + kl[0] + 1:kl[4] + kl[2] + kl[0] + 1 + kl[3] + kl[1] + 1]
+    lo0, hi0, lo1, hi1 = U[0], U[U.size - 1], V[0], V[V.size - 1]
+    x = np.empty(3)
+    t = np.empty((2, 3))
+    F = np.empty(3)
+    J = np.empty((3, 3))
+    step = np.empty(3)
+    th0, th1, g = u0, v0, 0.0
+    for _ in range(max_iter):
+        # theta stays in the domain: the clip of evaluate() is the identity here
+        e = master_point(k, min(max(th0, lo0), hi0), min(max(th1, lo1), hi1), layout, knots, control,
+                         origin, h, shape, elements, tol, connectivity, u, x, t)
+        if e < 0:
+            return -1 - OUTSIDE
+        for c in range(3):
+            F[c] = x[c] - x1[c] - g * n1[c]
+            J[c, 0] = t[0, c]
+            J[c, 1] = t[1, c]
+            J[c, 2] = -n1[c]
+        if np.sqrt(F[0] * F[0] + F[1] * F[1] + F[2] * F[2]) <= ray_tol * h:
+            out[0], out[1], out[2] = th0, th1, g
+            m0 = t[0, 1] * t[1, 2] - t[0, 2] * t[1, 1]
+            m1 = t[0, 2] * t[1, 0] - t[0, 0] * t[1, 2]
+            m2 = t[0, 0] * t[1, 1] - t[0, 1] * t[1, 0]
+            return 1 if m0 * n1[0] + m1 * n1[1] + m2 * n1[2] < 0.0 else 0
+        if not solve3(J, F, step) or not abs(g) <= 4.0 * max_gap:
+            return 0
+        a0 = th0 + step[0]
+        a1 = th1 + step[1]
+        g += step[2]
+        c0 = min(max(a0, lo0), hi0)
+        c1 = min(max(a1, lo1), hi1)
+        if c0 == a0 - step[0] and c1 == a1 - step[1] and (c0 != a0 or c1 != a1):
+            return 0
+        th0, th1 = c0, c1
+    return 0
+
+
+@njit(cache=True, parallel=True)
+def trace(x1, n1, start_piece, start_theta, max_gap, ray_tol, max_iter, layout, knots, control, origin, h,
+          shape, elements, tol, connectivity, u, found, piece, theta, g, status):
+    """Per point ``p`` of ``x1``, ``n1`` (n, 3): :func:`ray_newton` from each start in turn;
+    the first admissible hit (``|g| <= max_gap`` too) is written to ``found`` (n,) bool,
+    ``piece`` (n,), ``theta`` (n, 2), ``g`` (n,) (others left as they are). ``status`` (n,)
+    gets :data:`OUTSIDE` where an iterate left the active elements, else 0."""
+    for p in prange(x1.shape[0]):
+        out = np.empty(3)
+        status[p] = 0
+        for c in range(start_piece.shape[1]):
+            k = start_piece[p, c]
+            if k < 0:
+                break
+            r = ray_newton(x1[p], n1[p], k, start_theta[p, c, 0], start_theta[p, c, 1], max_gap, ray_tol,
+                           max_iter, layout, knots, control, origin, h, shape, elements, tol, connectivity,
+                           u, out)
+            if r < 0:
+                status[p] = -1 - r
+                break
+            if r == 1 and abs(out[2]) <= max_gap:
+                found[p] = True
+                piece[p] = k
+                theta[p, 0], theta[p, 1], g[p] = out[0], out[1], out[2]
+                break
