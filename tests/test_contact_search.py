@@ -1,0 +1,160 @@
+"""NURBS+FE ray tracing: the numba search against a slow, obvious reference.
+
+A small sphere (slave) pressed into a larger one (master, a single patch that closes on its
+seam and has poles) with random nodal displacements on the master: rays of both gap signs,
+hits on several master elements. The reference redoes the search point by point: brute-force
+nearest seeds of the samples of each ray, then Newton from each start with
+:meth:`NurbsFeSurface.evaluate` and ``numpy.linalg.solve``; the hits (found, patch, theta,
+g) must be the same. The kernel's pieces are checked on their own too.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cgfem.contact import _ray_kernels as rk
+from cgfem.contact.kinematics import slave_state
+from cgfem.contact.surfaces import CANDIDATES, MAX_RAY_NEWTON, RAY_TOL, NurbsFeSurface, RayHits, pack_patches
+from cgfem.embedding.quadrature import embed, grid_for
+from cgfem.fem.space import LOCATE_TOL, Space
+from cgfem.geometry.builders import build_solid
+from cgfem.geometry.specs import SphereSpec
+
+MAX_GAP = 0.3
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """Master surface (n seeds), slave points ``x1``, normals ``n1`` (n, 3), master ``u``."""
+    master = build_solid(SphereSpec(center=(0, 0, 0), radius=1.0))
+    slave = build_solid(SphereSpec(center=(0.1, -0.05, 1.45), radius=0.5))
+    em = embed(master, grid_for(master, 0.5, 0, (0.13, 0.29, 0.41)), "nurbs")
+    es = embed(slave, grid_for(slave, 0.3, 0, (0.37, 0.71, 0.23)), "nurbs")
+    Sm, Ss = Space.from_embedding(em), Space.from_embedding(es)
+    surface = NurbsFeSurface(master, Sm, em.surface, np.arange(len(master.patches)))
+    rule = es.boundary
+    frames = NurbsFeSurface(slave, Ss, rule, np.arange(len(slave.patches))).slave_frames(rule)
+    st = slave_state(frames, np.zeros((frames.size, 8, 3)))
+    u = 0.02 * np.random.default_rng(1).standard_normal(Sm.n_dofs)
+    return surface, st.x, st.n, u
+
+
+def _newton(surface: NurbsFeSurface, u, x1, n1, piece: int, theta: np.ndarray):
+    """One start, written out: converged and admissible, theta (2,), g."""
+    (u0, u1), (v0, v1) = surface.solid.patches[piece].surface.domain
+    lo, hi = np.array([u0, v0]), np.array([u1, v1])
+    th, g = np.array(theta, float), 0.0
+    for _ in range(MAX_RAY_NEWTON):
+        mp = surface.evaluate(u, np.array([piece]), th[None], second=False)
+        F = mp.x[0] - x1 - g * n1
+        J = np.column_stack([mp.t[0, 0], mp.t[0, 1], -n1])
+        if np.linalg.norm(F) <= RAY_TOL * surface.h:
+            return abs(g) <= MAX_GAP and mp.normal[0] @ n1 < 0.0, th, g
+        if not abs(np.linalg.det(J)) > 1e-300 or abs(g) > 4.0 * MAX_GAP:
+            return False, th, g
+        step = -np.linalg.solve(J, F)
+        new = th + step[:2]
+        g += step[2]
+        clipped = np.clip(new, lo, hi)
+        if np.all(clipped == new - step[:2]) and np.any(clipped != new):
+            return False, th, g
+        th = clipped
+    return False, th, g
+
+
+def reference_search(surface: NurbsFeSurface, u, x1, n1, previous: RayHits | None) -> RayHits:
+    """Point by point: the previous pairing, then the brute-force nearest seeds of the ray's
+    samples nearest to the ray first (within twice the spacing, each once); the first
+    admissible hit."""
+    n = x1.shape[0]
+    hits = RayHits(np.zeros(n, bool), np.zeros(n, np.int64), np.zeros((n, 2)), np.full(n, np.inf))
+    with np.errstate(invalid="ignore"):                 # normals at the poles: unused
+        seeds = surface.evaluate(u, surface.seed_piece, surface.seed_theta, second=False).x
+    m = int(np.ceil(2.0 * MAX_GAP / surface.spacing)) + 1
+    ts = np.linspace(-MAX_GAP, MAX_GAP, m)
+    for p in range(n):
+        samples = x1[p] + ts[:, None] * n1[p]
+        nearest = np.argmin(np.linalg.norm(samples[:, None] - seeds[None], axis=2), axis=1)
+        v = seeds[nearest] - x1[p]
+        off = np.linalg.norm(v - (v @ n1[p])[:, None] * n1[p], axis=1)
+        order = np.argsort(off, kind="stable")[:min(m, 4 * CANDIDATES)]
+        starts = [(previous.piece[p], previous.theta[p])] if previous is not None and previous.found[p] else []
+        starts += [(surface.seed_piece[nearest[j]], surface.seed_theta[nearest[j]])
+                   for c, j in enumerate(order) if off[j] <= 2.0 * surface.spacing
+                   and nearest[j] not in nearest[order[:c]]]
+        for piece, theta in starts:
+            ok, th, g = _newton(surface, u, x1[p], n1[p], piece, theta)
+            if ok:
+                hits.found[p], hits.piece[p], hits.theta[p], hits.g[p] = True, piece, th, g
+                break
+    return hits
+
+
+def _assert_same(a: RayHits, b: RayHits) -> None:
+    np.testing.assert_array_equal(a.found, b.found)
+    np.testing.assert_array_equal(a.piece[a.found], b.piece[a.found])
+    np.testing.assert_allclose(a.theta[a.found], b.theta[a.found], rtol=0.0, atol=1e-12)
+    np.testing.assert_allclose(a.g[a.found], b.g[a.found], rtol=0.0, atol=1e-12)
+
+
+def test_search_equals_reference(scene):
+    surface, x1, n1, u = scene
+    fast = surface.search(u, x1, n1, MAX_GAP)
+    slow = reference_search(surface, u, x1, n1, None)
+    _assert_same(fast, slow)
+    # not vacuous: many hits, of both gap signs, and some rays with none
+    g = fast.g[fast.found]
+    assert 50 <= g.size < x1.shape[0] and g.min() < -0.01 and g.max() > 0.01
+    # the hits are on the rays: x2(theta) = x1 + g n1, the master normal against n1
+    mp = surface.evaluate(u, fast.piece[fast.found], fast.theta[fast.found])
+    np.testing.assert_allclose(mp.x, x1[fast.found] + g[:, None] * n1[fast.found], rtol=0.0, atol=1e-11)
+    assert np.all(np.einsum("pk,pk->p", mp.normal, n1[fast.found]) < 0.0)
+
+
+def test_search_from_previous_pairing_equals_reference(scene):
+    surface, x1, n1, u = scene
+    previous = surface.search(0.7 * u, x1, n1, MAX_GAP)
+    fast = surface.search(u, x1, n1, MAX_GAP, previous)
+    _assert_same(fast, reference_search(surface, u, x1, n1, previous))
+    assert np.sum(previous.found & fast.found) >= 50
+
+
+def test_skipped_rays_are_far_from_the_master(scene):
+    """A ray the box prefilter drops passes farther than its segment from every master point."""
+    surface, x1, n1, u = scene
+    skipped = ~surface._may_hit(u, x1, MAX_GAP)
+    assert 0 < skipped.sum() < x1.shape[0]
+    with np.errstate(invalid="ignore"):
+        seeds = surface.evaluate(u, surface.seed_piece, surface.seed_theta, second=False).x
+    d = np.linalg.norm(x1[skipped][:, None] - seeds[None], axis=2).min(axis=1)
+    assert d.min() > MAX_GAP
+
+
+def test_master_point_equals_evaluate(scene):
+    surface, _, _, u = scene
+    layout, knots, control = pack_patches([p.surface for p in surface.solid.patches])
+    rng = np.random.default_rng(2)
+    (u0, u1), (v0, v1) = surface.solid.patches[0].surface.domain
+    theta = np.column_stack([rng.uniform(u0, u1, 20), rng.uniform(v0, v1, 20)])
+    mp = surface.evaluate(u, np.zeros(20, np.int64), theta, second=False)
+    grid = surface.space.grid
+    x, t = np.empty(3), np.empty((2, 3))
+    for p in range(20):
+        slot = rk.master_point(0, theta[p, 0], theta[p, 1], layout, knots, control, np.asarray(grid.origin, float),
+                               grid.h, np.asarray(grid.shape, np.int64), surface.space.elements, LOCATE_TOL,
+                               surface.space.connectivity, u.reshape(-1, 3), x, t)
+        assert slot == mp.slot[p]
+        np.testing.assert_allclose(x, mp.x[p], rtol=0.0, atol=1e-14)
+        np.testing.assert_allclose(t, mp.t[p], rtol=0.0, atol=1e-13)
+
+
+def test_solve3_equals_numpy():
+    rng = np.random.default_rng(3)
+    step = np.empty(3)
+    for _ in range(20):
+        J, F = rng.standard_normal((3, 3)), rng.standard_normal(3)
+        assert rk.solve3(J.copy(), F, step)
+        np.testing.assert_allclose(step, -np.linalg.solve(J, F), rtol=1e-12, atol=1e-12)
+    singular = np.array([[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 1.0, 1.0]])
+    assert not rk.solve3(singular, np.ones(3), step)
