@@ -244,6 +244,11 @@ def test_newton_timings_and_geometry_figures(tmp_path):
                                   volume_error=10.0 ** (-3 - level), seconds=(level + 1.0, 3.0 * level + 1)))
     fig = figure("newton", paths)
     assert len(fig.axes) == 2
+    # summary.json stores norms (N): drawn relative to the first residual of each step
+    scaled = make_run(tmp_path / "scaled", "planar", 0, "facets", reactions=np.ones((2, 2)),
+                      residuals=[[6329.0, 0.3, 1e-6], [298.0, 3e-8]])
+    np.testing.assert_allclose(Run.load(scaled).newton_residuals(),
+                               np.tile(np.array([6329.0, 0.3, 1e-6, 298.0, 3e-8]) / 6329.0, 2), rtol=1e-14)
     for ax in fig.axes:
         assert len(ax.get_lines()) == 2
         np.testing.assert_allclose(ax.get_lines()[0].get_ydata(), [1.0, 0.1, 1e-3, 1e-9])

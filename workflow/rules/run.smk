@@ -1,7 +1,8 @@
 rule run_case:
     """Solve one example at one level with one surface definition. A run that fails to
-    converge (exit 1, summary.json written with status "failed") is a result; bad input
-    (exit 2) or a crash is an error of the pipeline."""
+    converge (exit 1, summary.json written with status "failed", or "outer_not_converged"
+    when every step solved but an outer loop hit its cap) is a result; bad input (exit 2) or
+    a crash is an error of the pipeline."""
     input:
         case=case_file,
         check="results/check/{case}.json",

@@ -139,12 +139,15 @@ class Run:
         return np.array([s["reactions"][key] for s in self.steps], float).reshape(-1, 3)
 
     def newton_residuals(self) -> np.ndarray:
-        """Relative Newton residuals of every pass of every step, in order (all iterations)."""
+        """Newton residual norms of every pass of every step, in order (all iterations), each
+        relative to the first residual of its step (summary.json stores norms in N; the
+        solver's own reference, printed as ``|r|/ref`` in the run log, is not stored)."""
         values: list[float] = []
         for s in self.steps:
             passes = s.get("pass_residuals") or [s["newton_residuals"]]
+            first = float(passes[0][0]) or 1.0
             for residuals in passes:
-                values.extend(float(r) for r in residuals)
+                values.extend(float(r) / first for r in residuals)
         return np.array(values)
 
     def max_von_mises(self, body: str, step: int = -1) -> float:
