@@ -46,7 +46,8 @@ def _newton(surface: NurbsFeSurface, u, x1, n1, piece: int, theta: np.ndarray):
     lo, hi = np.array([u0, v0]), np.array([u1, v1])
     th, g = np.array(theta, float), 0.0
     for _ in range(MAX_RAY_NEWTON):
-        mp = surface.evaluate(u, np.array([piece]), th[None], second=False)
+        with np.errstate(invalid="ignore"):             # a start at a pole: no normal yet
+            mp = surface.evaluate(u, np.array([piece]), th[None], second=False)
         F = mp.x[0] - x1 - g * n1
         J = np.column_stack([mp.t[0, 0], mp.t[0, 1], -n1])
         if np.linalg.norm(F) <= RAY_TOL * surface.h:
