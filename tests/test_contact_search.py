@@ -121,15 +121,19 @@ def test_search_from_previous_pairing_equals_reference(scene):
     assert np.sum(previous.found & fast.found) >= 50
 
 
-def test_skipped_rays_are_far_from_the_master(scene):
-    """A ray the box prefilter drops passes farther than its segment from every master point."""
+def test_prefilter_keeps_every_ray_through_the_master(scene):
+    """The box prefilter drops slave rays (not vacuous), but never one whose segment passes
+    through a master point: rays through the seeds in random directions are all kept."""
     surface, x1, n1, u = scene
-    skipped = ~surface._may_hit(u, x1, MAX_GAP)
-    assert 0 < skipped.sum() < x1.shape[0]
+    assert 0 < np.sum(~surface._may_hit(u, x1, MAX_GAP, n1)) < x1.shape[0]
     with np.errstate(invalid="ignore"):
         seeds = surface.evaluate(u, surface.seed_piece, surface.seed_theta, second=False).x
-    d = np.linalg.norm(x1[skipped][:, None] - seeds[None], axis=2).min(axis=1)
-    assert d.min() > MAX_GAP
+    rng = np.random.default_rng(4)
+    d = rng.standard_normal(seeds.shape)
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    g = rng.uniform(-MAX_GAP, MAX_GAP, seeds.shape[0])
+    g[:10] = MAX_GAP                                                  # segment ends on the seed
+    assert np.all(surface._may_hit(u, seeds - g[:, None] * d, MAX_GAP, d))
 
 
 def test_master_point_equals_evaluate(scene):

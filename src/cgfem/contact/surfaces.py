@@ -186,7 +186,7 @@ class NurbsFeSurface:
         admissible hit of a point is kept (:func:`cgfem.contact._ray_kernels.trace`)."""
         n = x1.shape[0]
         best = RayHits(np.zeros(n, bool), np.zeros(n, np.int64), np.zeros((n, 2)), np.full(n, np.inf))
-        rows = np.flatnonzero(self._may_hit(u, x1, max_gap))
+        rows = np.flatnonzero(self._may_hit(u, x1, max_gap, n1))
         if rows.size == 0:
             return best
         x1, n1 = np.ascontiguousarray(x1[rows], dtype=float), np.ascontiguousarray(n1[rows], dtype=float)
@@ -213,20 +213,36 @@ class NurbsFeSurface:
         best.found[rows], best.piece[rows], best.theta[rows], best.g[rows] = found, pc, th, g
         return best
 
-    def _may_hit(self, u: np.ndarray, x1: np.ndarray, max_gap: float) -> np.ndarray:
-        """(n,) bool: the ray segment ``|g| <= max_gap`` from ``x1`` (n, 3) may meet the
-        master. A master point ``x = Q + N . U2`` of element ``e`` lies in the box of the
-        element's cube moved by the range of its nodal displacements (``N >= 0`` sums to 1),
-        so a segment whose midpoint is farther than ``max_gap`` plus that box's
-        circumradius (and a margin for the locator's tolerance) from every box centre has no
-        hit; its points are skipped."""
+    def _may_hit(self, u: np.ndarray, x1: np.ndarray, max_gap: float, n1: np.ndarray) -> np.ndarray:
+        """(n,) bool: the ray segment ``x1 + g n1``, ``|g| <= max_gap`` ((n, 3) each), may
+        meet the master. A master point ``x = Q + N . U2`` of element ``e`` lies in the box of
+        the element's cube moved by the range of its nodal displacements (``N >= 0`` sums to
+        1); a segment that meets no such box (widened by a margin for the locator's and
+        Newton's tolerances) has no hit, and its point is skipped. Boxes near the segment's
+        midpoint are found with a k-d tree, then cut against the segment (slab test)."""
         U = u.reshape(-1, 3)[self.space.connectivity]                  # (n_el, 8, 3)
         lo, hi = U.min(axis=1), U.max(axis=1)
         centre = self._centres + 0.5 * (lo + hi)
-        radius = np.linalg.norm(0.5 * self.h + 0.5 * (hi - lo), axis=1).max()
-        reach = max_gap + radius + 1e-6 * self.h
-        dist, _ = cKDTree(centre).query(x1, distance_upper_bound=reach)
-        return dist <= reach
+        half = 0.5 * self.h + 0.5 * (hi - lo) + 1e-6 * self.h           # (n_el, 3)
+        length = max_gap + 1e-6 * self.h
+        reach = length + np.linalg.norm(half, axis=1).max()
+        tree = cKDTree(centre)
+        may = np.zeros(x1.shape[0], bool)
+        rows = np.flatnonzero(tree.query(x1, distance_upper_bound=reach)[0] <= reach)
+        boxes = tree.query_ball_point(x1[rows], r=reach)
+        pt = np.repeat(rows, [len(b) for b in boxes])
+        if pt.size == 0:
+            return may
+        el = np.concatenate([np.asarray(b, np.int64) for b in boxes if len(b)])
+        d, n, c, w = x1[pt], n1[pt], centre[el], half[el]
+        inside = np.abs(d - c) <= w                                     # per axis
+        with np.errstate(divide="ignore", invalid="ignore"):
+            a, b = (c - w - d) / n, (c + w - d) / n
+        # the segment's parameters inside each slab (a ray parallel to a slab: all or none)
+        enter = np.where(n == 0.0, np.where(inside, -np.inf, np.inf), np.minimum(a, b)).max(axis=1)
+        leave = np.where(n == 0.0, np.where(inside, np.inf, -np.inf), np.maximum(a, b)).min(axis=1)
+        may[pt[np.maximum(enter, -length) <= np.minimum(leave, length)]] = True
+        return may
 
     def _starts(self, u: np.ndarray, x1: np.ndarray, n1: np.ndarray, max_gap: float
                 ) -> tuple[np.ndarray, np.ndarray]:
