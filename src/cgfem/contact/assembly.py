@@ -55,7 +55,9 @@ class ContactSet:
         o = self.offsets
         for p in self.pairs:
             us, um = self._split(u, p)
-            r_s, r_m, trip = p.assemble(us, um, tangent, update)
+            # only linearization points (tangent evaluations) move the recorded pairing and
+            # active set: line-search trials must not count as active-set switches
+            r_s, r_m, trip = p.assemble(us, um, tangent, update and tangent)
             r[o[p.slave]:o[p.slave + 1]] += r_s
             r[o[p.master]:o[p.master + 1]] += r_m
             if trip is not None:
