@@ -135,7 +135,8 @@ def ray_newton(x1, n1, k, u0, v0, max_gap, ray_tol, max_iter, layout, knots, con
     step = np.empty(3)
     th0, th1, g = u0, v0, 0.0
     for _ in range(max_iter):
-        # theta stays in the domain: the clip of evaluate() is the identity here
+        # evaluated at theta clipped to the domain, as evaluate() does (iterates are inside
+        # it; a start is taken as given)
         e = master_point(k, min(max(th0, lo0), hi0), min(max(th1, lo1), hi1), layout, knots, control,
                          origin, h, shape, elements, tol, connectivity, u, x, t)
         if e < 0:
