@@ -114,11 +114,40 @@ def test_search_equals_reference(scene):
 
 
 def test_search_from_previous_pairing_equals_reference(scene):
+    """From a previous pairing whose master elements are not recorded (``slot=None``), the
+    search equals the reference point by point."""
     surface, x1, n1, u = scene
-    previous = surface.search(0.7 * u, x1, n1, MAX_GAP)
+    first = surface.search(0.7 * u, x1, n1, MAX_GAP)
+    previous = RayHits(first.found, first.piece, first.theta, first.g)
     fast = surface.search(u, x1, n1, MAX_GAP, previous)
     _assert_same(fast, reference_search(surface, u, x1, n1, previous))
     assert np.sum(previous.found & fast.found) >= 50
+
+
+def test_a_hit_keeps_its_master_element_across_a_face(scene):
+    """With the previous pairing's elements recorded, a hit that moved out of its element by
+    less than STICKY (in local coordinates) stays in it: the master surface is evaluated with
+    that element's field (extrapolated), the hit still lies on the ray in it, and every hit
+    farther out, or without a previous pairing, is in the element that holds it."""
+    from cgfem.contact._ray_kernels import STICKY
+    surface, x1, n1, u = scene
+    first = surface.search(0.7 * u, x1, n1, MAX_GAP)
+    fast = surface.search(u, x1, n1, MAX_GAP, first)
+    rows = np.flatnonzero(fast.found)
+    mp = surface.evaluate(u, fast.piece[rows], fast.theta[rows], slot=fast.slot[rows])
+    np.testing.assert_allclose(mp.x, x1[rows] + fast.g[rows, None] * n1[rows], rtol=0.0, atol=1e-11)
+    X = mp.x - np.einsum("pa,pak->pk", mp.phi, u.reshape(-1, 3)[surface.space.connectivity[mp.slot]])
+    located, _ = surface.space.locate(X)
+    xi = (X - surface.space.centres()[fast.slot[rows]]) / (0.5 * surface.space.h)
+    kept = located != fast.slot[rows]
+    assert np.all(np.abs(xi[kept]).max(axis=1) <= 1.0 + STICKY)
+    assert np.all(first.slot[rows[kept]] == fast.slot[rows[kept]])
+    # without a previous pairing every hit is in the element holding its reference point
+    fresh = surface.search(u, x1, n1, MAX_GAP)
+    f = np.flatnonzero(fresh.found)
+    mf = surface.evaluate(u, fresh.piece[f], fresh.theta[f], second=False)
+    Xf = mf.x - np.einsum("pa,pak->pk", mf.phi, u.reshape(-1, 3)[surface.space.connectivity[mf.slot]])
+    np.testing.assert_array_equal(fresh.slot[f], surface.space.locate(Xf)[0])
 
 
 def test_prefilter_keeps_every_ray_through_the_master(scene):

@@ -31,6 +31,10 @@ from cgfem.geometry._nurbs_kernels import surface_derivs
 
 #: ``trace`` status of a point: a Newton iterate's ``Q`` lay in no active element
 OUTSIDE = 1
+#: a hit keeps its master element while its local coordinates stay within 1 + STICKY of it
+#: (the NURBS+FE master surface is only C0 across element faces: without this a Newton step
+#: of 1e-8 h can carry a loaded hit across the kink and back)
+STICKY = 2e-3
 
 
 @njit(cache=True)
@@ -46,9 +50,37 @@ def patch_derivs(k, uu, vv, layout, knots, control, SKL):
 @njit(cache=True)
 def master_point(k, uu, vv, layout, knots, control, origin, h, shape, elements, tol, connectivity, u,
                  x, t):
+    """:func:`master_point_in` with no preferred element."""
+    return master_point_in(k, uu, vv, layout, knots, control, origin, h, shape, elements, tol,
+                           connectivity, u, x, t, -1)
+
+
+@njit(cache=True)
+def sticky_xi(Q, prefer, origin, h, shape, elements, xi):
+    """Local coordinates ``xi`` (3,) of ``Q`` (3,) in active element ``prefer``; True if they lie
+    within ``1 + STICKY`` (the element is kept), False otherwise or if ``prefer < 0``."""
+    if prefer < 0:
+        return False
+    gid = elements[prefer]
+    ijk0 = gid // (shape[1] * shape[2])
+    ijk1 = (gid // shape[2]) % shape[1]
+    ijk2 = gid % shape[2]
+    ok = True
+    for d, c in ((0, ijk0), (1, ijk1), (2, ijk2)):
+        xi[d] = (Q[d] - (origin[d] + (c + 0.5) * h)) / (0.5 * h)
+        if abs(xi[d]) > 1.0 + STICKY:
+            ok = False
+    return ok
+
+
+@njit(cache=True)
+def master_point_in(k, uu, vv, layout, knots, control, origin, h, shape, elements, tol, connectivity, u,
+                    x, t, prefer):
     """Current master point ``x`` (3,) and tangents ``t`` (2, 3) at ``(uu, vv)`` of patch ``k``
-    (eq. 16): ``x = Q + N . U2``, ``t_alpha = Q_alpha + (grad N . Q_alpha) . U2``. Returns
-    the master element's slot (-1: ``Q`` in no active element; ``x``, ``t`` then unset)."""
+    (eq. 16): ``x = Q + N . U2``, ``t_alpha = Q_alpha + (grad N . Q_alpha) . U2``, in element
+    ``prefer`` if ``Q`` lies within its cube widened by ``STICKY`` (:func:`sticky_xi`), else in
+    the element holding ``Q``. Returns the element's slot (-1: ``Q`` in no active element;
+    ``x``, ``t`` then unset)."""
     SKL = np.empty((2, 2, 3))
     patch_derivs(k, uu, vv, layout, knots, control, SKL)
     Q = np.empty((1, 3))
@@ -56,7 +88,10 @@ def master_point(k, uu, vv, layout, knots, control, origin, h, shape, elements, 
         Q[0, c] = SKL[0, 0, c]
     slot = np.empty(1, np.int64)
     xi = np.empty((1, 3))
-    locate(Q, origin, h, shape, elements, tol, slot, xi)
+    if sticky_xi(Q[0], prefer, origin, h, shape, elements, xi[0]):
+        slot[0] = prefer
+    else:
+        locate(Q, origin, h, shape, elements, tol, slot, xi)
     e = slot[0]
     if e < 0:
         return e
@@ -116,12 +151,14 @@ def solve3(J, F, step):
 
 @njit(cache=True)
 def ray_newton(x1, n1, k, u0, v0, max_gap, ray_tol, max_iter, layout, knots, control, origin, h, shape,
-               elements, tol, connectivity, u, out):
+               elements, tol, connectivity, u, prefer, out):
     """Newton on ``x2(theta) - x1 - g n1 = 0`` from ``(u0, v0)`` on patch ``k``, ``g = 0``;
     a step leaving the patch's domain is clipped onto it, and a clipped step that does not
     move is a stuck one. Stops converged (``|F| <= ray_tol h``), on a singular ``J``, a
     stuck step, ``|g| > 4 max_gap`` or after ``max_iter`` iterations. ``out`` (3,) receives
-    ``(xi, eta, g)``. Returns 1 converged with ``m2 . n1 < 0`` (``m2 = t_xi x t_eta``, the
+    ``(xi, eta, g, slot)`` (the master element of the hit: ``prefer``, the element of the
+    previous pairing, while ``Q`` lies within :data:`STICKY` of it, else the element holding
+    ``Q``). Returns 1 converged with ``m2 . n1 < 0`` (``m2 = t_xi x t_eta``, the
     master normal against the ray), 0 not, ``-1 - OUTSIDE`` if an iterate left the active
     elements."""
     kl = layout[k]
@@ -137,8 +174,8 @@ def ray_newton(x1, n1, k, u0, v0, max_gap, ray_tol, max_iter, layout, knots, con
     for _ in range(max_iter):
         # evaluated at theta clipped to the domain, as evaluate() does (iterates are inside
         # it; a start is taken as given)
-        e = master_point(k, min(max(th0, lo0), hi0), min(max(th1, lo1), hi1), layout, knots, control,
-                         origin, h, shape, elements, tol, connectivity, u, x, t)
+        e = master_point_in(k, min(max(th0, lo0), hi0), min(max(th1, lo1), hi1), layout, knots, control,
+                            origin, h, shape, elements, tol, connectivity, u, x, t, prefer)
         if e < 0:
             return -1 - OUTSIDE
         for c in range(3):
@@ -147,7 +184,7 @@ def ray_newton(x1, n1, k, u0, v0, max_gap, ray_tol, max_iter, layout, knots, con
             J[c, 1] = t[1, c]
             J[c, 2] = -n1[c]
         if np.sqrt(F[0] * F[0] + F[1] * F[1] + F[2] * F[2]) <= ray_tol * h:
-            out[0], out[1], out[2] = th0, th1, g
+            out[0], out[1], out[2], out[3] = th0, th1, g, e
             m0 = t[0, 1] * t[1, 2] - t[0, 2] * t[1, 1]
             m1 = t[0, 2] * t[1, 0] - t[0, 0] * t[1, 2]
             m2 = t[0, 0] * t[1, 1] - t[0, 1] * t[1, 0]
@@ -166,14 +203,15 @@ def ray_newton(x1, n1, k, u0, v0, max_gap, ray_tol, max_iter, layout, knots, con
 
 
 @njit(cache=True, parallel=True)
-def trace(x1, n1, start_piece, start_theta, max_gap, ray_tol, max_iter, layout, knots, control, origin, h,
-          shape, elements, tol, connectivity, u, found, piece, theta, g, status):
+def trace(x1, n1, start_piece, start_theta, start_slot, max_gap, ray_tol, max_iter, layout, knots, control,
+          origin, h, shape, elements, tol, connectivity, u, found, piece, theta, g, slot, status):
     """Per point ``p`` of ``x1``, ``n1`` (n, 3): :func:`ray_newton` from each start in turn;
     the first admissible hit (``|g| <= max_gap`` too) is written to ``found`` (n,) bool,
-    ``piece`` (n,), ``theta`` (n, 2), ``g`` (n,) (others left as they are). ``status`` (n,)
+    ``piece`` (n,), ``theta`` (n, 2), ``g`` (n,), ``slot`` (n,) master element (others left as
+    they are); ``start_slot`` (n, c) the preferred element of each start (-1: none). ``status`` (n,)
     gets :data:`OUTSIDE` where an iterate left the active elements, else 0."""
     for p in prange(x1.shape[0]):
-        out = np.empty(3)
+        out = np.empty(4)
         status[p] = 0
         for c in range(start_piece.shape[1]):
             k = start_piece[p, c]
@@ -181,7 +219,7 @@ def trace(x1, n1, start_piece, start_theta, max_gap, ray_tol, max_iter, layout, 
                 break
             r = ray_newton(x1[p], n1[p], k, start_theta[p, c, 0], start_theta[p, c, 1], max_gap, ray_tol,
                            max_iter, layout, knots, control, origin, h, shape, elements, tol, connectivity,
-                           u, out)
+                           u, start_slot[p, c], out)
             if r < 0:
                 status[p] = -1 - r
                 break
@@ -189,4 +227,5 @@ def trace(x1, n1, start_piece, start_theta, max_gap, ray_tol, max_iter, layout, 
                 found[p] = True
                 piece[p] = k
                 theta[p, 0], theta[p, 1], g[p] = out[0], out[1], out[2]
+                slot[p] = np.int64(out[3])
                 break

@@ -164,7 +164,7 @@ class ContactPair:
             return r_s, r_m, (triplets if tangent else None)
         frames = self.frames.select(rows)
         st_r = type(st)(*(getattr(st, f)[rows] for f in ("x", "a", "b", "m", "n", "norm_m")))
-        mp = self.surface.evaluate(u_m, hits.piece[rows], hits.theta[rows])
+        mp = self.surface.evaluate(u_m, hits.piece[rows], hits.theta[rows], slot=_slots(hits, rows))
         d = gap_derivatives(frames, st_r, mp, hits.g[rows], self.finite, second=tangent)
         lam_r = lam[rows]
         dofs_s = self.slave_space.element_dofs[frames.slot]                       # (k, 24)
@@ -205,12 +205,18 @@ class ContactPair:
         force = np.zeros((self.n_points, 3))
         rows = np.flatnonzero(active)
         if rows.size:
-            t = self.surface.evaluate(u_m, hits.piece[rows], hits.theta[rows], second=False).t
+            t = self.surface.evaluate(u_m, hits.piece[rows], hits.theta[rows], second=False,
+                                      slot=_slots(hits, rows)).t
             m2 = np.cross(t[:, 0], t[:, 1])
             q = -m2 / np.einsum("pk,pk->p", m2, st.n[rows])[:, None]
             force[rows] = -(w[rows] * lam[rows])[:, None] * q
         return ContactPoints(st.x, st.n, np.where(hits.found, hits.g, np.nan), lam, active, w,
                              self.state.p_N.copy(), force)
+
+
+def _slots(hits: RayHits, rows: np.ndarray) -> np.ndarray | None:
+    """The master elements of hits ``rows`` as the search chose them (None if unrecorded)."""
+    return None if hits.slot is None else hits.slot[rows]
 
 
 def slave_gradients(space, frames: SlaveFrames) -> np.ndarray:

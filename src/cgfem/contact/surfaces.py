@@ -95,12 +95,14 @@ def pack_patches(surfaces: list[NurbsSurface]) -> tuple[np.ndarray, np.ndarray, 
 @dataclass(frozen=True)
 class RayHits:
     """Result of a search: ``found`` (n,) bool, ``piece`` (n,) patch or triangle, ``theta``
-    (n, 2), ``g`` (n,) signed gap."""
+    (n, 2), ``g`` (n,) signed gap, ``slot`` (n,) the master element of each hit (-1: none;
+    ``None``: not recorded)."""
 
     found: np.ndarray
     piece: np.ndarray
     theta: np.ndarray
     g: np.ndarray
+    slot: np.ndarray | None = None
 
 
 class NurbsFeSurface:
@@ -147,9 +149,12 @@ class NurbsFeSurface:
         return SlaveFrames(slots, rule.x.copy(), A, B, N, ca, cb, rule.w.copy())
 
     # -- master side ---------------------------------------------------------------------
-    def evaluate(self, u: np.ndarray, piece: np.ndarray, theta: np.ndarray, second: bool = True) -> MasterPoints:
+    def evaluate(self, u: np.ndarray, piece: np.ndarray, theta: np.ndarray, second: bool = True,
+                 slot: np.ndarray | None = None) -> MasterPoints:
         """The current master surface at ``(piece, theta)`` (n,), (n, 2); without
-        ``second`` the second derivatives ``s`` are left zero (the search needs none)."""
+        ``second`` the second derivatives ``s`` are left zero (the search needs none).
+        ``slot`` (n,): the master elements to evaluate in (those of the search's hits, which
+        may keep an element a hit has just left by up to ``STICKY``); default: located."""
         n = piece.size
         order = 2 if second else 1
         Q = np.zeros((n, 3, 3, 3))
@@ -160,7 +165,11 @@ class NurbsFeSurface:
             uv = np.column_stack([np.clip(theta[rows, 0], u0, u1), np.clip(theta[rows, 1], v0, v1)])
             Q[rows, :order + 1, :order + 1] = srf.derivatives(uv, order)
         X, Qt = Q[:, 0, 0], np.stack([Q[:, 1, 0], Q[:, 0, 1]], axis=1)
-        slots, xi = _locate(self.space, X)
+        if slot is None or np.any(np.asarray(slot) < 0):
+            slots, xi = _locate(self.space, X)
+        else:
+            slots = np.asarray(slot, np.int64)
+            xi = (X - self._centres[slots]) / (0.5 * self.h)
         N, dN, d2N = shape_derivatives(xi, self.h)
         U = element_values(self.space, u, np.maximum(slots, 0))
         psi = np.einsum("paj,pcj->pca", dN, Qt)                     # dN . Q_alpha  (n, 2, 8)
@@ -185,32 +194,40 @@ class NurbsFeSurface:
         the first ``4 CANDIDATES`` samples' seeds); a ray no seed lies near has none. The first
         admissible hit of a point is kept (:func:`cgfem.contact._ray_kernels.trace`)."""
         n = x1.shape[0]
-        best = RayHits(np.zeros(n, bool), np.zeros(n, np.int64), np.zeros((n, 2)), np.full(n, np.inf))
+        best = RayHits(np.zeros(n, bool), np.zeros(n, np.int64), np.zeros((n, 2)), np.full(n, np.inf),
+                       np.full(n, -1, np.int64))
         rows = np.flatnonzero(self._may_hit(u, x1, max_gap, n1))
         if rows.size == 0:
             return best
         x1, n1 = np.ascontiguousarray(x1[rows], dtype=float), np.ascontiguousarray(n1[rows], dtype=float)
         piece, theta = self._starts(u, x1, n1, max_gap)
+        start_slot = np.full(piece.shape, -1, np.int64)
         if previous is not None:
             prev = previous.found[rows]
             piece = np.concatenate([np.where(prev, previous.piece[rows], -1)[:, None], piece], axis=1)
             theta = np.concatenate([previous.theta[rows][:, None], theta], axis=1)
+            before = previous.slot[rows] if previous.slot is not None else np.full(rows.size, -1, np.int64)
+            start_slot = np.concatenate([np.where(prev, before, -1)[:, None], start_slot], axis=1)
             # a point without a previous pairing starts from the seeds: shift them left
             order = np.argsort(piece < 0, axis=1, kind="stable")
             piece = np.take_along_axis(piece, order, axis=1)
             theta = np.take_along_axis(theta, order[:, :, None], axis=1)
+            start_slot = np.take_along_axis(start_slot, order, axis=1)
         found, pc, th, g = np.zeros(rows.size, bool), np.zeros(rows.size, np.int64), np.zeros((rows.size, 2)), \
             np.full(rows.size, np.inf)
         status = np.zeros(rows.size, np.int64)
+        slot = np.full(rows.size, -1, np.int64)
         grid = self.space.grid
-        _rk.trace(x1, n1, np.ascontiguousarray(piece), np.ascontiguousarray(theta), float(max_gap), RAY_TOL,
+        _rk.trace(x1, n1, np.ascontiguousarray(piece), np.ascontiguousarray(theta),
+                  np.ascontiguousarray(start_slot), float(max_gap), RAY_TOL,
                   MAX_RAY_NEWTON, self._layout, self._knots, self._control, np.asarray(grid.origin, float),
                   float(self.h), np.asarray(grid.shape, np.int64), self.space.elements, LOCATE_TOL,
                   self.space.connectivity, np.ascontiguousarray(u, dtype=float).reshape(-1, 3),
-                  found, pc, th, g, status)
+                  found, pc, th, g, slot, status)
         if np.any(status == _rk.OUTSIDE):
             raise ValueError(f"{int(np.sum(status == _rk.OUTSIDE))} surface points outside the active elements")
         best.found[rows], best.piece[rows], best.theta[rows], best.g[rows] = found, pc, th, g
+        best.slot[rows] = np.where(found, slot, -1)
         return best
 
     def _may_hit(self, u: np.ndarray, x1: np.ndarray, max_gap: float, n1: np.ndarray) -> np.ndarray:
@@ -314,8 +331,10 @@ class FacetSurface:
         X, A, B, phi, ca, cb = self._coefficients(tri, theta)
         return SlaveFrames(self.slot[tri], X, A, B, phi, ca, cb, np.asarray(w, float).copy())
 
-    def evaluate(self, u: np.ndarray, piece: np.ndarray, theta: np.ndarray, second: bool = True) -> MasterPoints:
-        """The current (flat) master triangles at ``(piece, theta)``; ``s`` is zero."""
+    def evaluate(self, u: np.ndarray, piece: np.ndarray, theta: np.ndarray, second: bool = True,
+                 slot: np.ndarray | None = None) -> MasterPoints:
+        """The current (flat) master triangles at ``(piece, theta)``; ``s`` is zero (a
+        triangle lies in one element: ``slot`` is that of the triangle)."""
         X, A, B, phi, ca, cb = self._coefficients(piece, theta)
         U = element_values(self.space, u, self.slot[piece])
         x = X + np.einsum("pa,pak->pk", phi, U)
@@ -359,4 +378,4 @@ class FacetSurface:
         best.piece[r] = cand[tris[first]]
         best.theta[r] = np.column_stack([l1[first], l2[first]])
         best.g[r] = g[first]
-        return best
+        return RayHits(best.found, best.piece, best.theta, best.g, np.where(best.found, self.slot[best.piece], -1))
