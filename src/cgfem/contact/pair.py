@@ -35,10 +35,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
 
 from cgfem.contact.kinematics import SlaveFrames, gap_derivatives, slave_state
 from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface, RayHits, element_values, shape_derivatives
 
+#: slave points whose (48, 48) tangents are formed at once (memory: about 0.3 GB per chunk
+#: with the temporaries of the second derivatives)
+CHUNK_POINTS = 2048
 #: switches of one point's active status in one increment before its tangent is held active
 MAX_SWITCHES = 10
 #: largest |gap| searched, in element sizes: a point is active only while
@@ -159,9 +163,22 @@ class ContactPair:
         r_s = np.zeros(u_s.size)
         r_m = np.zeros(u_m.size)
         rows = np.flatnonzero(held & hits.found)
-        triplets = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
-        if rows.size == 0:
-            return r_s, r_m, (triplets if tangent else None)
+        n = u_s.size + u_m.size
+        K = sp.csr_matrix((n, n))
+        # points in chunks: each carries (48, 48) blocks and their temporaries (a few kB)
+        for chunk in np.array_split(rows, max(1, -(-rows.size // CHUNK_POINTS))):
+            if chunk.size:
+                Kc = self._add_points(chunk, st, hits, lam, u_s, u_m, tangent, r_s, r_m)
+                if Kc is not None:
+                    K = K + Kc
+        if not tangent:
+            return r_s, r_m, None
+        K = K.tocoo()
+        return r_s, r_m, (K.row.astype(np.int64), K.col.astype(np.int64), K.data)
+
+    def _add_points(self, rows, st, hits, lam, u_s, u_m, tangent, r_s, r_m) -> sp.csr_matrix | None:
+        """Residual of the slave points ``rows`` added to ``r_s``, ``r_m``; their tangent (CSR on
+        the local dofs: slave dofs, then master dofs + ``u_s.size``) if asked."""
         frames = self.frames.select(rows)
         st_r = type(st)(*(getattr(st, f)[rows] for f in ("x", "a", "b", "m", "n", "norm_m")))
         mp = self.surface.evaluate(u_m, hits.piece[rows], hits.theta[rows], slot=_slots(hits, rows))
@@ -173,16 +190,17 @@ class ContactPair:
         np.add.at(r_s, dofs_s, f[:, :24])
         np.add.at(r_m, dofs_m, f[:, 24:])
         if not tangent:
-            return r_s, r_m, None
-        K = (d.w * self.eps)[:, None, None] * d.dg[:, :, None] * d.dg[:, None, :] \
-            + (d.w * lam_r)[:, None, None] * d.d2g \
-            + lam_r[:, None, None] * d.dg[:, :, None] * d.dw[:, None, :]
+            return None
+        K = (d.w * self.eps)[:, None, None] * d.dg[:, :, None] * d.dg[:, None, :]
         # a held point that is not active has no force but keeps its penalty stiffness
-        K[lam_r == 0.0] = ((d.w * self.eps)[:, None, None] * d.dg[:, :, None] * d.dg[:, None, :])[lam_r == 0.0]
+        loaded = lam_r != 0.0
+        K[loaded] += (d.w * lam_r)[loaded, None, None] * d.d2g[loaded] \
+            + lam_r[loaded, None, None] * d.dg[loaded, :, None] * d.dw[loaded, None, :]
         dofs = np.concatenate([dofs_s, dofs_m + u_s.size], axis=1)                # (k, 48)
         rr = np.repeat(dofs, 48, axis=1).ravel()
         cc = np.tile(dofs, (1, 48)).ravel()
-        return r_s, r_m, (rr, cc, K.ravel())
+        n = u_s.size + u_m.size
+        return sp.coo_matrix((K.ravel(), (rr, cc)), shape=(n, n)).tocsr()
 
     def _multiplier(self, hits: RayHits) -> tuple[np.ndarray, np.ndarray]:
         trial = np.where(hits.found, self.state.p_N + self.eps * np.where(hits.found, hits.g, 0.0), np.inf)
