@@ -92,6 +92,18 @@ def pack_patches(surfaces: list[NurbsSurface]) -> tuple[np.ndarray, np.ndarray, 
     return layout, knots, control
 
 
+def _segment_meets_box(d: np.ndarray, n: np.ndarray, c: np.ndarray, w: np.ndarray, length: float) -> np.ndarray:
+    """(k,) bool: the segment ``d + g n``, ``|g| <= length`` ((k, 3) each) meets the box of
+    centre ``c`` and half-widths ``w`` ((k, 3) or (1, 3)): slab test, a segment parallel to a
+    slab being in it entirely or not at all."""
+    inside = np.abs(d - c) <= w                                         # per axis
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a, b = (c - w - d) / n, (c + w - d) / n
+    enter = np.where(n == 0.0, np.where(inside, -np.inf, np.inf), np.minimum(a, b)).max(axis=1)
+    leave = np.where(n == 0.0, np.where(inside, np.inf, -np.inf), np.maximum(a, b)).min(axis=1)
+    return np.maximum(enter, -length) <= np.minimum(leave, length)
+
+
 @dataclass(frozen=True)
 class RayHits:
     """Result of a search: ``found`` (n,) bool, ``piece`` (n,) patch or triangle, ``theta``
@@ -242,14 +254,28 @@ class NurbsFeSurface:
         centre = self._centres + 0.5 * (lo + hi)
         half = 0.5 * self.h + 0.5 * (hi - lo) + 1e-6 * self.h           # (n_el, 3)
         length = max_gap + 1e-6 * self.h
-        reach = length + np.linalg.norm(half, axis=1).max()
-        tree = cKDTree(centre)
         may = np.zeros(x1.shape[0], bool)
-        rows = np.flatnonzero(tree.query(x1, distance_upper_bound=reach)[0] <= reach)
-        boxes = tree.query_ball_point(x1[rows], r=reach)
-        pt = np.repeat(rows, [len(b) for b in boxes])
-        if pt.size == 0:
-            return may
+        # ordinary boxes through a k-d tree with their own reach; the few boxes a distorted
+        # iterate blows up (a radius over twice the cube's) against every point, so that one
+        # of them does not widen the query of all
+        radius = np.linalg.norm(half, axis=1)
+        big = radius > np.sqrt(3.0) * self.h
+        small = np.flatnonzero(~big)
+        if small.size:
+            reach = length + radius[small].max()
+            tree = cKDTree(centre[small])
+            rows = np.flatnonzero(tree.query(x1, distance_upper_bound=reach)[0] <= reach)
+            for part in np.array_split(rows, max(1, -(-rows.size // 4096))):
+                boxes = tree.query_ball_point(x1[part], r=reach)
+                pt = np.repeat(part, [len(b) for b in boxes])
+                if pt.size:
+                    el = small[np.concatenate([np.asarray(b, np.int64) for b in boxes if len(b)])]
+                    may[pt[_segment_meets_box(x1[pt], n1[pt], centre[el], half[el], length)]] = True
+        for e in np.flatnonzero(big):
+            rest = np.flatnonzero(~may)
+            hit = _segment_meets_box(x1[rest], n1[rest], centre[e][None], half[e][None], length)
+            may[rest[hit]] = True
+        return may
         el = np.concatenate([np.asarray(b, np.int64) for b in boxes if len(b)])
         d, n, c, w = x1[pt], n1[pt], centre[el], half[el]
         inside = np.abs(d - c) <= w                                     # per axis
