@@ -140,6 +140,7 @@ def test_a_hit_keeps_its_master_element_across_a_face(scene):
     located, _ = surface.space.locate(X)
     xi = (X - surface.space.centres()[fast.slot[rows]]) / (0.5 * surface.space.h)
     kept = located != fast.slot[rows]
+    assert kept.sum() >= 1                      # this scene has a hit that crossed a face
     assert np.all(np.abs(xi[kept]).max(axis=1) <= 1.0 + STICKY)
     assert np.all(first.slot[rows[kept]] == fast.slot[rows[kept]])
     # without a previous pairing every hit is in the element holding its reference point
@@ -192,3 +193,21 @@ def test_solve3_equals_numpy():
         np.testing.assert_allclose(step, -np.linalg.solve(J, F), rtol=1e-12, atol=1e-12)
     singular = np.array([[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 1.0, 1.0]])
     assert not rk.solve3(singular, np.ones(3), step)
+
+
+def test_sticky_band_is_exactly_STICKY():
+    """An element is kept for a point within 1 + STICKY of its cube in local coordinates,
+    and left just outside, on every axis and side."""
+    from cgfem.contact._ray_kernels import STICKY, sticky_xi
+    origin, h, shape = np.zeros(3), 0.5, np.array([3, 3, 3], np.int64)
+    elements = np.arange(27, dtype=np.int64)
+    centre = np.full(3, 1.5 * h)                    # element (1, 1, 1), slot 13
+    xi = np.empty(3)
+    for axis in range(3):
+        for side in (-1.0, 1.0):
+            for extra, kept in ((0.5 * STICKY, True), (2.0 * STICKY, False)):
+                Q = centre.copy()
+                Q[axis] += side * (1.0 + extra) * 0.5 * h
+                assert sticky_xi(Q, 13, origin, h, shape, elements, xi) == kept
+                assert abs(xi[axis] - side * (1.0 + extra)) < 1e-12
+    assert not sticky_xi(centre, -1, origin, h, shape, elements, xi)

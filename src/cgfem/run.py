@@ -143,7 +143,7 @@ def build_pairs(case: Case, models: list[BodyModel], solids: dict, surface: str,
     for spec in case.contact:
         tic = time.perf_counter()
         pair = build_pair(f"{spec.slave}/{spec.master}", spec, index, models, solids, surface,
-                          case.kinematics == "finite")
+                          case.kinematics == "finite", case.body(spec.slave).material.E)
         pairs.append(pair)
         log(f"contact {pair.name}: {pair.n_points} slave points, penalty {pair.eps:.3g} Pa/m "
             f"({time.perf_counter() - tic:.2f} s)")

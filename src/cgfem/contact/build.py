@@ -26,8 +26,9 @@ def patch_ids(solid_names: tuple[str, ...], wanted: tuple[str, ...] | None) -> n
 
 
 def build_pair(name: str, spec: ContactSpec, index: dict[str, int], models: list, solids: dict[str, Solid],
-               definition: str, finite: bool) -> ContactPair:
-    """The pair ``spec`` between ``models[index[spec.slave]]`` and the master's model."""
+               definition: str, finite: bool, E: float) -> ContactPair:
+    """The pair ``spec`` between ``models[index[spec.slave]]`` and the master's model;
+    ``E``: Young's modulus of the slave (Pa), for the penalty ``kappa E / h``."""
     if definition not in DEFINITIONS:
         raise NotImplementedError(f"contact with the {definition!r} surface definition")
     s_model, m_model = models[index[spec.slave]], models[index[spec.master]]
@@ -44,8 +45,6 @@ def build_pair(name: str, spec: ContactSpec, index: dict[str, int], models: list
         slave_srf = FacetSurface(s_model.space, s_fac.triangles, s_fac.element, np.isin(s_fac.patch, s_ids))
         frames = slave_srf.slave_frames(rule.piece, rule.uv, rule.w)
         master = FacetSurface(m_model.space, m_fac.triangles, m_fac.element, np.isin(m_fac.patch, m_ids))
-    mu, lam = s_model.elasticity.mu, s_model.elasticity.lam
-    E = mu * (3.0 * lam + 2.0 * mu) / (lam + mu)        # Young's modulus of the slave
     h = s_model.space.h
     max_gap = MAX_GAP_H * max(h, m_model.space.h)
     return ContactPair(name, index[spec.slave], index[spec.master], s_model.space, m_model.space, frames,

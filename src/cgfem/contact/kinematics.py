@@ -120,6 +120,21 @@ class GapDerivatives:
     dw: np.ndarray
 
 
+def area_weight(frames: SlaveFrames, norm_m: np.ndarray, current_area: bool) -> np.ndarray:
+    """Area weight (n,) of the slave points: the current area ``w0 |a x b| / |A x B|``
+    (``norm_m = |a x b|``) in finite strain, the reference ``w0`` otherwise."""
+    if not current_area:
+        return frames.w.copy()
+    return frames.w * norm_m / np.linalg.norm(np.cross(frames.A, frames.B), axis=1)
+
+
+def gap_gradient_direction(t: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """``q = dg/dx1`` (n, 3) of the ray pairing with master tangents ``t`` (n, 2, 3) and slave
+    normal ``n`` (n, 3): ``-m2 / (m2 . n)``, ``m2 = t_xi x t_eta`` (``J^{-T} e_3``)."""
+    m2 = np.cross(t[:, 0], t[:, 1])
+    return -m2 / np.einsum("pk,pk->p", m2, n)[:, None]
+
+
 def gap_derivatives(frames: SlaveFrames, slave: SlaveState, master: MasterPoints, g: np.ndarray,
                     current_area: bool, second: bool = True) -> GapDerivatives:
     """Derivatives of the ray-traced gap ``g`` (module docstring) at ``n`` paired points.
@@ -142,17 +157,12 @@ def gap_derivatives(frames: SlaveFrames, slave: SlaveState, master: MasterPoints
     Fv[:, :, 24:] = np.einsum("pa,kc->pcak", master.phi, _E).reshape(n_pts, 3, 24)
     J = np.stack([master.t[:, 0], master.t[:, 1], -n], axis=2)     # columns
     theta = -np.linalg.solve(J, Fv)                                 # (n, 3, 48)
-    m2 = np.cross(master.t[:, 0], master.t[:, 1])
-    q = -m2 / np.einsum("pk,pk->p", m2, n)[:, None]
+    q = gap_gradient_direction(master.t, n)
     dg = theta[:, 2]
-    w0 = frames.w
-    R = np.linalg.norm(np.cross(frames.A, frames.B), axis=1)
-    if current_area:
-        w = w0 * r / R
-        dw = np.zeros((n_pts, 48))
-        dw[:, :24] = (w0 / R)[:, None] * np.einsum("pk,pik->pi", n, dm)
-    else:
-        w, dw = w0.copy(), np.zeros((n_pts, 48))
+    w = area_weight(frames, r, current_area)
+    dw = np.zeros((n_pts, 48))
+    if current_area:     # w = w0 |m| / R: dw = (w / |m|) n . dm
+        dw[:, :24] = (w / r)[:, None] * np.einsum("pk,pik->pi", n, dm)
     if not second:
         return GapDerivatives(g, dg, np.zeros((n_pts, 0, 0)), w, dw)
     th = theta[:, :2]                                               # (n, 2, 48)

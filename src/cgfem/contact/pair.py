@@ -37,7 +37,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from cgfem.contact.kinematics import SlaveFrames, gap_derivatives, slave_state
+from cgfem.contact.kinematics import (SlaveFrames, area_weight, gap_derivatives, gap_gradient_direction,
+                                      slave_state)
 from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface, RayHits, element_values, shape_derivatives
 
 #: slave points whose (48, 48) tangents are formed at once (memory: about 0.3 GB per chunk
@@ -125,10 +126,10 @@ class ContactPair:
         return U1, slave_state(self.frames, U1)
 
     def search(self, u_s: np.ndarray, u_m: np.ndarray) -> tuple:
-        """Current slave geometry and its master hits (the previous pairing first)."""
-        U1, st = self._slave(u_s)
-        hits = self.surface.search(u_m, st.x, st.n, self.max_gap, self.state.hits)
-        return U1, st, hits
+        """Current slave geometry (:class:`SlaveState`) and its master hits (the previous
+        pairing first)."""
+        st = self._slave(u_s)[1]
+        return st, self.surface.search(u_m, st.x, st.n, self.max_gap, self.state.hits)
 
     def freeze(self, u_s: np.ndarray, recovered: np.ndarray | None) -> None:
         """Freeze ``p_N = n . sigma* . n`` at the slave points from the slave's recovered
@@ -153,7 +154,7 @@ class ContactPair:
         """Residual contributions ``(r_s (n_s,), r_m (n_m,))`` and, if asked, the tangent as
         COO triplets ``(rows, cols, values)`` on the local dofs ``(slave dofs, master dofs
         + n_s)``. ``update``: record the pairing and active set (a Newton iterate)."""
-        U1, st, hits = self.search(u_s, u_m)
+        st, hits = self.search(u_s, u_m)
         lam, active = self._multiplier(hits)
         if update:
             self._record(hits, active)
@@ -216,18 +217,15 @@ class ContactPair:
     # -- outputs ---------------------------------------------------------------------------
     def points(self, u_s: np.ndarray, u_m: np.ndarray) -> ContactPoints:
         """The slave points at ``(u_s, u_m)`` with their gaps, pressures and weights."""
-        U1, st, hits = self.search(u_s, u_m)
+        st, hits = self.search(u_s, u_m)
         lam, active = self._multiplier(hits)
-        w = self.frames.w * (st.norm_m / np.linalg.norm(np.cross(self.frames.A, self.frames.B), axis=1)
-                             if self.finite else 1.0)
+        w = area_weight(self.frames, st.norm_m, self.finite)
         force = np.zeros((self.n_points, 3))
         rows = np.flatnonzero(active)
         if rows.size:
             t = self.surface.evaluate(u_m, hits.piece[rows], hits.theta[rows], second=False,
                                       slot=_slots(hits, rows)).t
-            m2 = np.cross(t[:, 0], t[:, 1])
-            q = -m2 / np.einsum("pk,pk->p", m2, st.n[rows])[:, None]
-            force[rows] = -(w[rows] * lam[rows])[:, None] * q
+            force[rows] = -(w[rows] * lam[rows])[:, None] * gap_gradient_direction(t, st.n[rows])
         return ContactPoints(st.x, st.n, np.where(hits.found, hits.g, np.nan), lam, active, w,
                              self.state.p_N.copy(), force)
 
