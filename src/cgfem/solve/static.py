@@ -116,7 +116,8 @@ class System:
                  tangent: bool) -> tuple[np.ndarray, sp.csr_matrix | None]:
         """Residual (n_dofs,) at ``u`` and load factor ``t`` with every body's recovered
         stress held at ``frozen_stress`` (one (n_nodes, 3, 3) array or None per body), and
-        the tangent if asked (CSR, block-diagonal over the bodies)."""
+        the tangent if asked (CSR: the bodies' blocks on the diagonal, contact couplings off
+        it)."""
         parts = [b.assemble(ub, t, s, tangent and not (self.linear and self._K is not None))
                  for b, ub, s in zip(self.bodies, self.split(u), frozen_stress)]
         r = np.concatenate([p[0] for p in parts])
@@ -129,7 +130,9 @@ class System:
         if self.linear:
             self._K = K
         if Kc is not None:
-            K = (K + Kc.tocsr() + self._floating_shift(K)).tocsr()
+            K = K + Kc.tocsr()
+            if self.floating:
+                K = K + self._floating_shift(K)
         return r, K
 
     def _floating_shift(self, K: sp.csr_matrix) -> sp.csr_matrix:
