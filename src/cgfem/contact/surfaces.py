@@ -16,7 +16,8 @@ Master search (ray tracing, eq. 2) lives here too: from each slave point along i
 normal, both ways (the gap is signed), candidates are found with a k-d tree over the
 current positions of dense samples of the master surface (its exact surface-rule points, or
 triangle centroids), so one search costs O(n log n); each candidate is then solved exactly
-(closed form for facets, the nearest admissible hit kept; for NURBS+FE a Newton solve on
+(closed form for facets, the nearest admissible hit kept, the previous pairing's triangle
+first while the ray meets its plane within ``STICKY`` of its edges; for NURBS+FE a Newton solve on
 ``(xi, eta, g)`` per start in the numba kernel :mod:`cgfem.contact._ray_kernels`, the previous
 pairing first when there is one, the first admissible hit kept). Admissible: the master
 normal opposes the slave normal and ``|g| <= max_gap``. Rays whose segment cannot reach the
@@ -372,6 +373,11 @@ class FacetSurface:
 
     def search(self, u: np.ndarray, x1: np.ndarray, n1: np.ndarray, max_gap: float,
                previous: RayHits | None = None) -> RayHits:
+        """Nearest admissible hit of each ray ``x1 + g n1`` (n, 3) on the current triangles.
+        A point whose ``previous`` hit lay on a triangle keeps it while the ray meets that
+        triangle's plane within ``STICKY`` (barycentric) of its edges: a hit on an edge
+        otherwise jumps between the two triangles' normals from one Newton iterate to the
+        next."""
         n = x1.shape[0]
         cand = self.candidates
         U = u.reshape(-1, 3)[self.space.connectivity[self.slot[cand]]]          # (m, 8, 3)
@@ -380,6 +386,9 @@ class FacetSurface:
         radius = np.linalg.norm(verts - centroid[:, None], axis=2).max()
         tree = cKDTree(centroid)
         best = RayHits(np.zeros(n, bool), np.zeros(n, np.int64), np.zeros((n, 2)), np.full(n, np.inf))
+        kept = np.full(n, -1, np.int64)
+        if previous is not None and previous.piece.shape == (n,):
+            kept[previous.found] = previous.piece[previous.found]
         pairs = tree.query_ball_point(x1, r=max_gap + radius)
         rows = np.repeat(np.arange(n), [len(p) for p in pairs])
         if rows.size == 0:
@@ -393,11 +402,14 @@ class FacetSurface:
         sol = np.full((rows.size, 3), np.nan)
         sol[good] = np.linalg.solve(J[good], (x1[rows] - v[:, 0])[good][..., None])[..., 0]
         l1, l2, g = sol[:, 0], sol[:, 1], sol[:, 2]
-        inside = good & (l1 >= -FACET_TOL) & (l2 >= -FACET_TOL) & (l1 + l2 <= 1.0 + FACET_TOL)
+        # a hit may stay on the triangle it had by up to STICKY (barycentric) past its edges
+        band = np.where(cand[tris] == kept[rows], _rk.STICKY, FACET_TOL)
+        inside = good & (l1 >= -band) & (l2 >= -band) & (l1 + l2 <= 1.0 + band)
         normal = np.cross(e1, e2)
         inside &= (np.einsum("pk,pk->p", normal, n1[rows]) < 0.0) & (np.abs(g) <= max_gap)
         hit = np.flatnonzero(inside)
-        order = hit[np.lexsort((np.abs(g[hit]), rows[hit]))]
+        # per point: the kept triangle first, then the nearest hit
+        order = hit[np.lexsort((np.abs(g[hit]), cand[tris[hit]] != kept[rows[hit]], rows[hit]))]
         first = order[np.concatenate([[True], rows[order][1:] != rows[order][:-1]])] if order.size else order
         r = rows[first]
         best.found[r] = True
