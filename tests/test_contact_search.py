@@ -15,7 +15,8 @@ import pytest
 
 from cgfem.contact import _ray_kernels as rk
 from cgfem.contact.kinematics import slave_state
-from cgfem.contact.surfaces import CANDIDATES, MAX_RAY_NEWTON, RAY_TOL, NurbsFeSurface, RayHits, pack_patches
+from cgfem.contact.surfaces import (CANDIDATES, MAX_RAY_NEWTON, RAY_TOL, NurbsFeSurface, RayHits,
+                                    closed_directions, pack_patches)
 from cgfem.embedding.quadrature import embed, grid_for
 from cgfem.fem.space import LOCATE_TOL, Space
 from cgfem.geometry.builders import build_solid
@@ -44,6 +45,7 @@ def _newton(surface: NurbsFeSurface, u, x1, n1, piece: int, theta: np.ndarray):
     """One start, written out: converged and admissible, theta (2,), g."""
     (u0, u1), (v0, v1) = surface.solid.patches[piece].surface.domain
     lo, hi = np.array([u0, v0]), np.array([u1, v1])
+    closed = np.array(closed_directions(surface.solid.patches[piece].surface))
     th, g = np.array(theta, float), 0.0
     for _ in range(MAX_RAY_NEWTON):
         with np.errstate(invalid="ignore"):             # a start at a pole: no normal yet
@@ -57,10 +59,12 @@ def _newton(surface: NurbsFeSurface, u, x1, n1, piece: int, theta: np.ndarray):
         step = -np.linalg.solve(J, F)
         new = th + step[:2]
         g += step[2]
-        clipped = np.clip(new, lo, hi)
-        if np.all(clipped == new - step[:2]) and np.any(clipped != new):
+        # across a seam: around; across an open edge: onto it (stuck if that is no move)
+        moved = np.where(closed, lo + (new - lo) % (hi - lo), np.clip(new, lo, hi))
+        moved = np.where(closed & (lo <= new) & (new < hi), new, moved)
+        if np.all(moved == th) and np.any(moved != new):
             return False, th, g
-        th = clipped
+        th = moved
     return False, th, g
 
 
@@ -211,3 +215,29 @@ def test_sticky_band_is_exactly_STICKY():
                 assert sticky_xi(Q, 13, origin, h, shape, elements, xi) == kept
                 assert abs(xi[axis] - side * (1.0 + extra)) < 1e-12
     assert not sticky_xi(centre, -1, origin, h, shape, elements, xi)
+
+
+def test_newton_wraps_across_a_seam(scene):
+    """The sphere closes on itself along u: a ray hitting just before the seam, started just
+    after it, converges to the hit by going around (the clipped step used to stop at the seam:
+    a penetrating point of chain3's middle torus went unpaired). The meridian direction is
+    open: a start past its end stays clipped."""
+    surface, _, _, u = scene
+    patch = surface.solid.patches[0].surface
+    assert closed_directions(patch) == (True, False)
+    layout, knots, control = pack_patches([p.surface for p in surface.solid.patches])
+    (u0, u1), (v0, v1) = patch.domain
+    grid = surface.space.grid
+    args = (layout, knots, control, np.asarray(grid.origin, float), grid.h, np.asarray(grid.shape, np.int64),
+            surface.space.elements, LOCATE_TOL, surface.space.connectivity, u.reshape(-1, 3))
+    out = np.empty(4)
+    for v in np.linspace(v0, v1, 7)[1:-1]:
+        target = np.array([u1 - 1e-3 * (u1 - u0), v])
+        mp = surface.evaluate(u, np.zeros(1, np.int64), target[None], second=False)
+        n1 = -mp.normal[0]                            # from outside, against the outward normal
+        x1 = mp.x[0] - 0.01 * n1
+        for start in (u0 + 2e-3 * (u1 - u0), u1 - 5e-3 * (u1 - u0)):
+            r = rk.ray_newton(x1, n1, 0, start, v, MAX_GAP, RAY_TOL, MAX_RAY_NEWTON, *args, -1, out)
+            assert r == 1
+            np.testing.assert_allclose(out[:2], target, atol=1e-10)
+            np.testing.assert_allclose(out[2], 0.01, atol=1e-12)

@@ -150,10 +150,48 @@ def solve3(J, F, step):
 
 
 @njit(cache=True)
+def wrap(a, lo, hi):
+    """``a`` brought into ``[lo, hi)`` modulo the period ``hi - lo`` (a closed direction)."""
+    if lo <= a < hi:
+        return a
+    return lo + (a - lo) % (hi - lo)
+
+
+@njit(cache=True, parallel=True)
+def trace(x1, n1, start_piece, start_theta, start_slot, max_gap, ray_tol, max_iter, layout, knots, control,
+          origin, h, shape, elements, tol, connectivity, u, found, piece, theta, g, slot, status):
+    """Per point ``p`` of ``x1``, ``n1`` (n, 3): :func:`ray_newton` from each start in turn;
+    the first admissible hit (``|g| <= max_gap`` too) is written to ``found`` (n,) bool,
+    ``piece`` (n,), ``theta`` (n, 2), ``g`` (n,), ``slot`` (n,) master element (others left as
+    they are); ``start_slot`` (n, c) the preferred element of each start (-1: none). ``status`` (n,)
+    gets :data:`OUTSIDE` where an iterate left the active elements, else 0."""
+    for p in prange(x1.shape[0]):
+        out = np.empty(4)
+        status[p] = 0
+        for c in range(start_piece.shape[1]):
+            k = start_piece[p, c]
+            if k < 0:
+                break
+            r = ray_newton(x1[p], n1[p], k, start_theta[p, c, 0], start_theta[p, c, 1], max_gap, ray_tol,
+                           max_iter, layout, knots, control, origin, h, shape, elements, tol, connectivity,
+                           u, start_slot[p, c], out)
+            if r < 0:
+                status[p] = -1 - r
+                break
+            if r == 1 and abs(out[2]) <= max_gap:
+                found[p] = True
+                piece[p] = k
+                theta[p, 0], theta[p, 1], g[p] = out[0], out[1], out[2]
+                slot[p] = np.int64(out[3])
+                break
+
+
+@njit(cache=True)
 def ray_newton(x1, n1, k, u0, v0, max_gap, ray_tol, max_iter, layout, knots, control, origin, h, shape,
                elements, tol, connectivity, u, prefer, out):
     """Newton on ``x2(theta) - x1 - g n1 = 0`` from ``(u0, v0)`` on patch ``k``, ``g = 0``;
-    a step leaving the patch's domain is clipped onto it, and a clipped step that does not
+    a step leaving the patch's domain wraps around along a closed direction (``layout[k, 6:8]``)
+    and is clipped onto the domain along an open one, and a clipped step that does not
     move is a stuck one. Stops converged (``|F| <= ray_tol h``), on a singular ``J``, a
     stuck step, ``|g| > 4 max_gap`` or after ``max_iter`` iterations. ``out`` (3,) receives
     ``(xi, eta, g, slot)`` (the master element of the hit: ``prefer``, the element of the
@@ -194,38 +232,9 @@ def ray_newton(x1, n1, k, u0, v0, max_gap, ray_tol, max_iter, layout, knots, con
         a0 = th0 + step[0]
         a1 = th1 + step[1]
         g += step[2]
-        c0 = min(max(a0, lo0), hi0)
-        c1 = min(max(a1, lo1), hi1)
+        c0 = wrap(a0, lo0, hi0) if kl[6] else min(max(a0, lo0), hi0)
+        c1 = wrap(a1, lo1, hi1) if kl[7] else min(max(a1, lo1), hi1)
         if c0 == a0 - step[0] and c1 == a1 - step[1] and (c0 != a0 or c1 != a1):
             return 0
         th0, th1 = c0, c1
     return 0
-
-
-@njit(cache=True, parallel=True)
-def trace(x1, n1, start_piece, start_theta, start_slot, max_gap, ray_tol, max_iter, layout, knots, control,
-          origin, h, shape, elements, tol, connectivity, u, found, piece, theta, g, slot, status):
-    """Per point ``p`` of ``x1``, ``n1`` (n, 3): :func:`ray_newton` from each start in turn;
-    the first admissible hit (``|g| <= max_gap`` too) is written to ``found`` (n,) bool,
-    ``piece`` (n,), ``theta`` (n, 2), ``g`` (n,), ``slot`` (n,) master element (others left as
-    they are); ``start_slot`` (n, c) the preferred element of each start (-1: none). ``status`` (n,)
-    gets :data:`OUTSIDE` where an iterate left the active elements, else 0."""
-    for p in prange(x1.shape[0]):
-        out = np.empty(4)
-        status[p] = 0
-        for c in range(start_piece.shape[1]):
-            k = start_piece[p, c]
-            if k < 0:
-                break
-            r = ray_newton(x1[p], n1[p], k, start_theta[p, c, 0], start_theta[p, c, 1], max_gap, ray_tol,
-                           max_iter, layout, knots, control, origin, h, shape, elements, tol, connectivity,
-                           u, start_slot[p, c], out)
-            if r < 0:
-                status[p] = -1 - r
-                break
-            if r == 1 and abs(out[2]) <= max_gap:
-                found[p] = True
-                piece[p] = k
-                theta[p, 0], theta[p, 1], g[p] = out[0], out[1], out[2]
-                slot[p] = np.int64(out[3])
-                break

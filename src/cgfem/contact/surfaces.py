@@ -77,15 +77,33 @@ def _locate(space: Space, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return slots, xi
 
 
+def closed_directions(surface: NurbsSurface, samples: int = 9) -> tuple[bool, bool]:
+    """Whether the patch closes on itself along u and along v (a seam: its two boundary
+    iso-curves of that direction coincide, to 1e-12 of its size), as a revolved surface does
+    along its turn. A ray Newton step across a seam wraps around instead of stopping there."""
+    (u0, u1), (v0, v1) = surface.domain
+    s = np.linspace(0.0, 1.0, samples)
+    lo, hi = surface.bounding_box()
+    size = float(np.max(hi - lo))
+    along_v, along_u = v0 + s * (v1 - v0), u0 + s * (u1 - u0)
+    closed = []
+    for a, b in ((np.column_stack([np.full(samples, u0), along_v]), np.column_stack([np.full(samples, u1), along_v])),
+                 (np.column_stack([along_u, np.full(samples, v0)]), np.column_stack([along_u, np.full(samples, v1)]))):
+        gap = np.linalg.norm(surface.evaluate(a) - surface.evaluate(b), axis=-1).max()
+        closed.append(bool(gap <= 1e-12 * size))
+    return closed[0], closed[1]
+
+
 def pack_patches(surfaces: list[NurbsSurface]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """NURBS patches as the flat arrays of :mod:`cgfem.contact._ray_kernels`: ``layout``
-    (n_patches, 6) rows ``(p, q, n_u, n_v, knot offset, control offset)``, ``knots`` (each
-    patch's ``knots_u`` then ``knots_v``) and ``control`` (the homogeneous nets, raveled)."""
-    layout = np.zeros((len(surfaces), 6), np.int64)
+    (n_patches, 8) rows ``(p, q, n_u, n_v, knot offset, control offset, closed along u,
+    closed along v)`` (:func:`closed_directions`), ``knots`` (each patch's ``knots_u`` then
+    ``knots_v``) and ``control`` (the homogeneous nets, raveled)."""
+    layout = np.zeros((len(surfaces), 8), np.int64)
     ko = co = 0
     for k, s in enumerate(surfaces):
         nu, nv = s.control.shape[:2]
-        layout[k] = (*s.degree, nu, nv, ko, co)
+        layout[k] = (*s.degree, nu, nv, ko, co, *closed_directions(s))
         ko += s.knots_u.size + s.knots_v.size
         co += s.control.size
     knots = np.concatenate([np.concatenate([s.knots_u, s.knots_v]) for s in surfaces])
