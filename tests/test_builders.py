@@ -8,10 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from cgfem.geometry.builders import box, build_solid, cylinder, half_torus, sphere, torus
+from cgfem.geometry.builders import (box, build_solid, cylinder, half_cylinder, half_torus, sphere,
+                                    torus)
 from cgfem.geometry.measure import areas_by_name, volume
-from cgfem.geometry.specs import (PATCH_NAMES, BoxSpec, CylinderSpec, HalfTorusSpec, SphereSpec,
-                                  TorusSpec)
+from cgfem.geometry.specs import (PATCH_NAMES, BoxSpec, CylinderSpec, HalfCylinderSpec, HalfTorusSpec,
+                                  SphereSpec, TorusSpec)
 from cgfem.geometry.watertight import check_watertight
 
 N_SAMPLES = 1000
@@ -83,6 +84,16 @@ def half_torus_specs():
     return specs
 
 
+def half_cylinder_specs():
+    rng = np.random.default_rng(5)
+    specs = [HalfCylinderSpec((0.0, 0.1, 1.0), (0.0, 1.0, 0.0), 1.0, 0.2, (0.0, 0.0, -1.0))]
+    for _ in range(3):
+        axis = unit(rng)
+        specs.append(HalfCylinderSpec(tuple(rng.uniform(-2, 2, 3)), tuple(axis), rng.uniform(0.1, 2.0),
+                                      rng.uniform(0.1, 3.0), tuple(perpendicular(rng, axis))))
+    return specs
+
+
 def box_specs():
     return [BoxSpec((0.0, 0.0, 0.0), (1.0, 1.0, 1.0)), BoxSpec((-1.0, 2.0, 0.5), (3.0, 2.5, 4.0)),
             BoxSpec((10.0, -7.0, 3.0), (10.001, -6.0, 300.0))]
@@ -139,23 +150,42 @@ def test_half_torus_points_and_normals(spec):
         assert np.max(np.abs(n + keep)) <= NORMAL_TOL  # outward: away from the kept half
 
 
-@pytest.mark.parametrize("spec", cylinder_specs(), ids=ids(cylinder_specs()))
-def test_cylinder_points_and_normals(spec):
-    rng = np.random.default_rng(13)
+def check_cylinder_faces(solid, spec, rng, keep=None):
+    """``side``, ``bottom`` and ``top`` lie on the cylinder of ``spec`` with outward normals;
+    with ``keep`` (3,), every point lies on its side of the axis."""
     c, a, r, h = np.array(spec.center), np.array(spec.axis), spec.radius, spec.height
     size = np.linalg.norm(c) + r + h
-    solid = cylinder(spec)
+    kept = (lambda p: np.all((p - c) @ keep >= -ON_SURFACE * size)) if keep is not None else (lambda p: True)
     p, n = sample(solid.named("side")[0].surface, rng)
     z, rho, e_rho = local(p, c, a)
     assert np.max(np.abs(rho - r)) <= ON_SURFACE * size
-    assert np.all(np.abs(z) <= 0.5 * h + ON_SURFACE * size)
+    assert np.all(np.abs(z) <= 0.5 * h + ON_SURFACE * size) and kept(p)
     assert np.max(np.abs(n - e_rho)) <= NORMAL_TOL
     for name, sign in (("bottom", -1.0), ("top", 1.0)):
         p, n = sample(solid.named(name)[0].surface, rng)
         z, rho, _ = local(p, c, a)
         assert np.max(np.abs(z - sign * 0.5 * h)) <= ON_SURFACE * size
-        assert np.all(rho <= r + ON_SURFACE * size)
+        assert np.all(rho <= r + ON_SURFACE * size) and kept(p)
         assert np.max(np.abs(n - sign * a)) <= NORMAL_TOL
+
+
+@pytest.mark.parametrize("spec", cylinder_specs(), ids=ids(cylinder_specs()))
+def test_cylinder_points_and_normals(spec):
+    check_cylinder_faces(cylinder(spec), spec, np.random.default_rng(13))
+
+
+@pytest.mark.parametrize("spec", half_cylinder_specs(), ids=ids(half_cylinder_specs()))
+def test_half_cylinder_points_and_normals(spec):
+    rng = np.random.default_rng(15)
+    c, a, keep = np.array(spec.center), np.array(spec.axis), np.array(spec.keep)
+    solid = half_cylinder(spec)
+    check_cylinder_faces(solid, spec, rng, keep)
+    size = np.linalg.norm(c) + spec.radius + spec.height
+    p, n = sample(solid.named("flat")[0].surface, rng)
+    z, rho, _ = local(p, c, a)
+    assert np.max(np.abs((p - c) @ keep)) <= ON_SURFACE * size
+    assert np.all((rho <= spec.radius + ON_SURFACE * size) & (np.abs(z) <= 0.5 * spec.height + ON_SURFACE * size))
+    assert np.max(np.abs(n + keep)) <= NORMAL_TOL
 
 
 @pytest.mark.parametrize("spec", box_specs(), ids=ids(box_specs()))
@@ -218,6 +248,18 @@ def test_cylinder_measures(spec):
     assert close(areas["top"], math.pi * r**2)
 
 
+@pytest.mark.parametrize("spec", half_cylinder_specs(), ids=ids(half_cylinder_specs()))
+def test_half_cylinder_measures(spec):
+    solid = half_cylinder(spec)
+    r, h = spec.radius, spec.height
+    areas = areas_by_name(solid)
+    assert close(volume(solid), 0.5 * math.pi * r**2 * h)
+    assert close(areas["side"], math.pi * r * h)
+    assert close(areas["flat"], 2.0 * r * h)
+    assert close(areas["bottom"], 0.5 * math.pi * r**2)
+    assert close(areas["top"], 0.5 * math.pi * r**2)
+
+
 @pytest.mark.parametrize("spec", box_specs(), ids=ids(box_specs()))
 def test_box_measures(spec):
     solid = box(spec)
@@ -232,7 +274,8 @@ def test_box_measures(spec):
 # -- names, dispatch, watertightness ----------------------------------------------------
 ALL = ([("box", s) for s in box_specs()] + [("sphere", s) for s in sphere_specs()]
        + [("cylinder", s) for s in cylinder_specs()] + [("torus", s) for s in torus_specs()]
-       + [("half_torus", s) for s in half_torus_specs()])
+       + [("half_torus", s) for s in half_torus_specs()]
+       + [("half_cylinder", s) for s in half_cylinder_specs()])
 
 
 @pytest.mark.parametrize("builder, spec", ALL, ids=[f"{b}-{i}" for i, (b, _) in enumerate(ALL)])

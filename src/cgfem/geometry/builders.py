@@ -1,4 +1,4 @@
-"""Exact NURBS solids: box, sphere, cylinder, torus and half torus.
+"""Exact NURBS solids: box, sphere, cylinder, half cylinder, torus and half torus.
 
 Curved patches are rational quadratic surfaces of revolution (the 9-point circle with
 weights ``1, sqrt(2)/2, ...``), so they represent the analytic surfaces exactly. Every patch
@@ -17,8 +17,8 @@ import numpy as np
 
 from cgfem.geometry.nurbs import NurbsSurface
 from cgfem.geometry.solid import Patch, Solid
-from cgfem.geometry.specs import (BoxSpec, CylinderSpec, GeometrySpec, HalfTorusSpec,
-                                  NurbsFileSpec, SphereSpec, TorusSpec)
+from cgfem.geometry.specs import (BoxSpec, CylinderSpec, GeometrySpec, HalfCylinderSpec,
+                                  HalfTorusSpec, NurbsFileSpec, SphereSpec, TorusSpec)
 
 _S = math.sqrt(0.5)
 
@@ -67,14 +67,16 @@ def revolve(profile_rz, profile_w, profile_knots, profile_degree: int, frame, ce
     return NurbsSurface.from_points((2, profile_degree), knots_u, profile_knots, points, weights)
 
 
-def disc(center, e_x, e_y, radius: float) -> NurbsSurface:
-    """Flat disc ``center + rho (cos t e_x + sin t e_y)``, ``rho <= radius``; u around the rim,
-    v from the rim (v = 0) to the centre (v = 1, a collapsed edge). Normal ``e_x x e_y``."""
-    rim = np.asarray(center, float) + radius * (CIRCLE_XY[:, 0, None] * np.asarray(e_x, float)
-                                                + CIRCLE_XY[:, 1, None] * np.asarray(e_y, float))
+def disc(center, e_x, e_y, radius: float, half: bool = False) -> NurbsSurface:
+    """Flat disc ``center + rho (cos t e_x + sin t e_y)``, ``rho <= radius``; u around the rim
+    (``t`` in ``[0, pi]`` if ``half``: the half disc on the ``e_y`` side), v from the rim
+    (v = 0) to the centre (v = 1, a collapsed edge). Normal ``e_x x e_y``."""
+    xy, wc, knots = (HALF_XY, HALF_W, HALF_KNOTS) if half else (CIRCLE_XY, CIRCLE_W, CIRCLE_KNOTS)
+    rim = np.asarray(center, float) + radius * (xy[:, 0, None] * np.asarray(e_x, float)
+                                                + xy[:, 1, None] * np.asarray(e_y, float))
     points = np.stack([rim, np.broadcast_to(np.asarray(center, float), rim.shape)], axis=1)
-    weights = np.repeat(CIRCLE_W[:, None], 2, axis=1)
-    return NurbsSurface.from_points((2, 1), CIRCLE_KNOTS, [0, 0, 1, 1], points, weights)
+    weights = np.repeat(wc[:, None], 2, axis=1)
+    return NurbsSurface.from_points((2, 1), knots, [0, 0, 1, 1], points, weights)
 
 
 def _quad(origin, du, dv) -> NurbsSurface:
@@ -118,6 +120,21 @@ def cylinder(spec: CylinderSpec) -> Solid:
     return Solid((Patch("side", side), Patch("bottom", bottom), Patch("top", top)))
 
 
+def half_cylinder(spec: HalfCylinderSpec) -> Solid:
+    """Patches ``side`` (half a turn, on the ``keep`` side), ``flat`` (the rectangle through the
+    axis), ``bottom`` and ``top`` (half discs at ``center -/+ axis * height / 2``)."""
+    a = np.asarray(spec.axis, float)
+    keep = np.asarray(spec.keep, float)
+    e1, e2, a = orthonormal_frame(a, first=np.cross(keep, a))  # e2 = a x e1 = keep
+    c = np.asarray(spec.center, float)
+    r, half_h = spec.radius, 0.5 * spec.height
+    side = revolve([(r, -half_h), (r, half_h)], [1, 1], [0, 0, 1, 1], 1, (e1, e2, a), c, half=True)
+    flat = _quad(c - r * e1 - half_h * a, 2.0 * r * e1, spec.height * a)  # normal e1 x a = -keep
+    bottom = disc(c - half_h * a, -e1, e2, r, half=True)  # normal -e1 x e2 = -a
+    top = disc(c + half_h * a, e1, e2, r, half=True)
+    return Solid((Patch("side", side), Patch("flat", flat), Patch("bottom", bottom), Patch("top", top)))
+
+
 def _tube_profile(R: float, r: float) -> np.ndarray:
     """Control points of the tube cross-section circle in the ``(rho, z)`` half-plane,
     counterclockwise from its outermost point."""
@@ -153,6 +170,8 @@ def build_solid(spec: GeometrySpec) -> Solid:
         return box(spec)
     if isinstance(spec, SphereSpec):
         return sphere(spec)
+    if isinstance(spec, HalfCylinderSpec):  # before CylinderSpec: it is a subclass
+        return half_cylinder(spec)
     if isinstance(spec, CylinderSpec):
         return cylinder(spec)
     if isinstance(spec, HalfTorusSpec):  # before TorusSpec: it is a subclass

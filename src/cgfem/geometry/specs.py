@@ -42,6 +42,14 @@ def _unit(name: str, value) -> tuple[float, float, float]:
     return vec
 
 
+def _keep(value, axis) -> tuple[float, float, float]:
+    """``keep``: a unit vector perpendicular to ``axis`` (the half of the solid kept)."""
+    keep = _unit("keep", value)
+    if abs(float(np.dot(keep, axis))) > UNIT_TOL:
+        raise InputError("keep", "must be perpendicular to axis")
+    return keep
+
+
 def _positive(name: str, value) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise InputError(name, f"expected a number, got {value!r}")
@@ -128,10 +136,23 @@ class HalfTorusSpec(TorusSpec):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        keep = _unit("keep", self.keep)
-        if abs(float(np.dot(keep, self.axis))) > UNIT_TOL:
-            raise InputError("keep", "must be perpendicular to axis")
-        object.__setattr__(self, "keep", keep)
+        object.__setattr__(self, "keep", _keep(self.keep, self.axis))
+
+
+@dataclass(frozen=True)
+class HalfCylinderSpec(CylinderSpec):
+    """The half of a cylinder where ``(p - center) . keep >= 0``; patches ``side flat bottom top``.
+
+    ``keep`` is a unit vector perpendicular to ``axis``. ``side`` is the half of the curved
+    face, ``flat`` the rectangle through the axis (outward normal ``-keep``), ``bottom`` and
+    ``top`` the half discs at ``center -/+ axis * height / 2``.
+    """
+
+    keep: tuple[float, float, float] = (1.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        object.__setattr__(self, "keep", _keep(self.keep, self.axis))
 
 
 @dataclass(frozen=True)
@@ -144,7 +165,8 @@ class NurbsFileSpec:
         object.__setattr__(self, "file", Path(self.file))
 
 
-GeometrySpec = BoxSpec | SphereSpec | CylinderSpec | TorusSpec | HalfTorusSpec | NurbsFileSpec
+GeometrySpec = (BoxSpec | SphereSpec | CylinderSpec | TorusSpec | HalfTorusSpec | HalfCylinderSpec
+                | NurbsFileSpec)
 
 #: builder name in a case file -> spec class
 BUILDERS: dict[str, type] = {
@@ -153,6 +175,7 @@ BUILDERS: dict[str, type] = {
     "cylinder": CylinderSpec,
     "torus": TorusSpec,
     "half_torus": HalfTorusSpec,
+    "half_cylinder": HalfCylinderSpec,
     "nurbs": NurbsFileSpec,
 }
 
@@ -163,4 +186,5 @@ PATCH_NAMES: dict[str, tuple[str, ...]] = {
     "cylinder": ("side", "bottom", "top"),
     "torus": ("surface",),
     "half_torus": ("tube", "cap_a", "cap_b"),
+    "half_cylinder": ("side", "flat", "bottom", "top"),
 }
