@@ -1,0 +1,126 @@
+"""Numba kernel of the rational basis functions of a NURBS surface and their parametric
+derivatives up to second order, at many points (the basis of the fitted contact surface,
+:mod:`cgfem.contact.fit`).
+
+The B-spline factors come from A2.1 FindSpan and A2.3 DersBasisFuns of
+:mod:`cgfem.geometry._nurbs_kernels`; the rational functions
+``R_ij = N_i M_j w_ij / W`` with ``W = sum_kl N_k M_l w_kl`` follow by the quotient rule of
+A4.4 written for every basis function instead of for the surface point::
+
+    R_s  = (A_s - R W_s) / W
+    R_ss = (A_ss - 2 R_s W_s - R W_ss) / W
+    R_st = (A_st - R_s W_t - R_t W_s - R W_st) / W
+
+(``A = N_i M_j w_ij`` and its tensor-product derivatives).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from cgfem.geometry._nurbs_kernels import ders_basis_funs, find_span
+
+#: rows of the derivative axis: R, R_s, R_t, R_ss, R_st, R_tt as ``(k, l)`` orders
+ORDERS = ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2))
+
+
+@njit(cache=True)
+def rational_basis_batch(p, q, U, V, weights, uv, index, R):
+    """Rational basis at the points ``uv`` (n, 2) of a surface of degrees ``(p, q)``, knot
+    vectors ``U``, ``V`` and weights ``weights`` (n_u, n_v).
+
+    ``index`` (n, (p+1)(q+1)) int64 receives the flat control index ``i n_v + j`` of every
+    non-vanishing function (u-major), ``R`` (n, 6, (p+1)(q+1)) its value and its derivatives
+    in the order of :data:`ORDERS` (derivatives above a degree are zero).
+    """
+    n_u = weights.shape[0]
+    n_v = weights.shape[1]
+    Nu = np.empty((3, p + 1))
+    Nv = np.empty((3, q + 1))
+    A = np.empty((6, (p + 1) * (q + 1)))
+    Wd = np.empty(6)
+    for k in range(uv.shape[0]):
+        u = uv[k, 0]
+        v = uv[k, 1]
+        su = find_span(n_u - 1, p, u, U)
+        sv = find_span(n_v - 1, q, v, V)
+        ders_basis_funs(su, u, p, 2, U, Nu)
+        ders_basis_funs(sv, v, q, 2, V, Nv)
+        for r in range(6):
+            Wd[r] = 0.0
+        m = 0
+        for a in range(p + 1):
+            for b in range(q + 1):
+                i = su - p + a
+                j = sv - q + b
+                w = weights[i, j]
+                A[0, m] = Nu[0, a] * Nv[0, b] * w
+                A[1, m] = Nu[1, a] * Nv[0, b] * w
+                A[2, m] = Nu[0, a] * Nv[1, b] * w
+                A[3, m] = Nu[2, a] * Nv[0, b] * w
+                A[4, m] = Nu[1, a] * Nv[1, b] * w
+                A[5, m] = Nu[0, a] * Nv[2, b] * w
+                for r in range(6):
+                    Wd[r] += A[r, m]
+                index[k, m] = i * n_v + j
+                m += 1
+        inv = 1.0 / Wd[0]
+        for m in range(A.shape[1]):
+            r0 = A[0, m] * inv
+            rs = (A[1, m] - r0 * Wd[1]) * inv
+            rt = (A[2, m] - r0 * Wd[2]) * inv
+            R[k, 0, m] = r0
+            R[k, 1, m] = rs
+            R[k, 2, m] = rt
+            R[k, 3, m] = (A[3, m] - 2.0 * rs * Wd[1] - r0 * Wd[3]) * inv
+            R[k, 4, m] = (A[4, m] - rs * Wd[2] - rt * Wd[1] - r0 * Wd[4]) * inv
+            R[k, 5, m] = (A[5, m] - 2.0 * rt * Wd[2] - r0 * Wd[5]) * inv
+
+
+@njit(cache=True)
+def banded_cholesky(ab):
+    """Cholesky factorization ``A = L L^T`` of a symmetric banded matrix in place, lower
+    band storage ``ab[d, j] = A[j + d, j]`` (bandwidth + 1, n) -> ``ab[d, j] = L[j + d, j]``.
+    Returns -1, or the first column whose pivot is not positive (A not positive definite)."""
+    bw = ab.shape[0] - 1
+    n = ab.shape[1]
+    for j in range(n):
+        # column j of L from the columns k < j that reach row j
+        for k in range(max(0, j - bw), j):
+            ljk = ab[j - k, k]
+            if ljk == 0.0:
+                continue
+            for i in range(j, min(n, k + bw + 1)):
+                ab[i - j, j] -= ab[i - k, k] * ljk
+        pivot = ab[0, j]
+        if not pivot > 0.0:
+            return j
+        d = np.sqrt(pivot)
+        ab[0, j] = d
+        for i in range(1, min(bw + 1, n - j)):
+            ab[i, j] /= d
+    return -1
+
+
+@njit(cache=True)
+def banded_cholesky_solve(ab, b):
+    """Solve ``L L^T x = b`` in place for ``b`` (n, m) with the factor of
+    :func:`banded_cholesky`."""
+    bw = ab.shape[0] - 1
+    n = ab.shape[1]
+    m = b.shape[1]
+    for j in range(n):                      # L y = b
+        for c in range(m):
+            b[j, c] /= ab[0, j]
+        for i in range(j + 1, min(n, j + bw + 1)):
+            lij = ab[i - j, j]
+            for c in range(m):
+                b[i, c] -= lij * b[j, c]
+    for j in range(n - 1, -1, -1):          # L^T x = y
+        for i in range(j + 1, min(n, j + bw + 1)):
+            lij = ab[i - j, j]
+            for c in range(m):
+                b[j, c] -= lij * b[i, c]
+        for c in range(m):
+            b[j, c] /= ab[0, j]

@@ -1,0 +1,423 @@
+"""The NURBS surface fitted to the FE displacement (``nurbs_fit``, paper eqs. 18-22).
+
+Per contact patch the control-point displacements ``V`` (n_ctrl, 3) are the least-squares
+fit of the FE displacement ``N u`` on the patch (eq. 18)::
+
+    M V = G u,   M_ij = int R_i R_j dA,   G_ia = int R_i N_a dA        (eqs. 19-20)
+
+integrated with the body's exact surface rule (its points on that patch), so the fitted
+surface is ``x = S(s, t) (P + V)`` (eq. 21). ``R_i`` are the rational basis functions of the
+*fitting space* of the patch (:func:`fit_space`): the paper's net refined by knot insertion
+(and degree elevation to 2) so that its spans are about one element size h long, because
+the original net of a torus cannot follow a fine grid's field. Refinement keeps the geometry
+and the parametrisation, so a rule point's ``(s, t)`` on the original patch is its ``(s, t)``
+on the fitting surface.
+
+Control functions are numbered u-major, ``k = i n_v + j`` (``i`` along u); ``V[k]`` moves
+control point ``P[k]``. The FE side acts per component: ``V[:, c] = M^{-1} G u[:, c]`` with
+``u`` (n_dofs,) node-major (``u.reshape(-1, 3)``).
+
+``M`` is banded (bandwidth ``p n_v + q`` in this numbering, or ``q n_u + p`` in the
+transposed one, whichever is smaller) and factorized once by a banded Cholesky
+(:class:`BandedCholesky`), which also proves it positive definite. On chain2_steel's torus
+tube at level 3 (about 7 000 control points, bandwidth about 110) the factorization takes
+milliseconds and a few MB.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import meshio
+import numpy as np
+import scipy.sparse as sp
+
+from cgfem.contact import _fit_kernels as _k
+from cgfem.embedding.export import write_vtu_files
+from cgfem.embedding.partition import SurfaceQuadrature
+from cgfem.errors import InputError
+from cgfem.fem.space import Space, shape_functions
+from cgfem.geometry.io import solid_from_dict, write_solid
+from cgfem.geometry.nurbs import NurbsSurface
+from cgfem.geometry.refine import elevate_degree, refine_knots
+from cgfem.geometry.solid import Patch, Solid
+
+#: default refinement of the fitting space: spans of about h (see :func:`fit_space`)
+DEFAULT_REFINE = "auto"
+#: ``auto`` raises each direction to at least this degree (a C1 fitted surface)
+AUTO_MIN_DEGREE = 2
+#: chords per knot span (and iso-lines per span of the other direction) measuring arc lengths
+ARC_SAMPLES = 8
+#: rows of :attr:`SurfaceBasis.values`: R, R_s, R_t, R_ss, R_st, R_tt
+ORDERS = _k.ORDERS
+
+
+# -- the fitting space ------------------------------------------------------------------
+def span_lengths(surface: NurbsSurface, direction: int) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct knots ``breaks`` (m + 1,) of ``direction`` (0: u, 1: v) and the physical length
+    (m,) of each of its m spans: the longest arc length of the span along that direction
+    over iso-lines of the other direction (:data:`ARC_SAMPLES` chords per span, iso-lines at
+    the other direction's breaks and :data:`ARC_SAMPLES` per span between them)."""
+    breaks = surface.breaks()
+    along, across = breaks[direction], breaks[1 - direction]
+    s = np.linspace(0.0, 1.0, ARC_SAMPLES + 1)
+    a = (along[:-1, None] + s[None, :] * np.diff(along)[:, None]).ravel()          # (m (S+1),)
+    b = np.unique((across[:-1, None] + s[None, :] * np.diff(across)[:, None]).ravel())
+    grid = np.stack(np.meshgrid(a, b, indexing="ij"), axis=-1).reshape(-1, 2)
+    if direction == 1:
+        grid = grid[:, ::-1]
+    x = surface.evaluate(np.ascontiguousarray(grid)).reshape(along.size - 1, ARC_SAMPLES + 1, b.size, 3)
+    chords = np.linalg.norm(np.diff(x, axis=1), axis=-1).sum(axis=1)                  # (m, lines)
+    return along, chords.max(axis=1)
+
+
+def _check_refine(refine) -> str | int:
+    if refine is None or refine == "none":
+        return "none"
+    if refine == "auto":
+        return "auto"
+    if isinstance(refine, (int, np.integer)) and not isinstance(refine, bool) and refine >= 0:
+        return int(refine)
+    raise InputError("fit", f"expected 'auto', 'none' or a number of knots per span >= 0, got {refine!r}")
+
+
+def fit_space(surface: NurbsSurface, h: float, refine: str | int | None = DEFAULT_REFINE) -> NurbsSurface:
+    """The fitting space of one patch: the same geometry on a refined net.
+
+    ``refine``: ``"auto"`` (default) raises every degree to at least
+    :data:`AUTO_MIN_DEGREE` and splits every knot span into ``max(1, round(L / h))`` equal
+    parametric spans, L its physical length (:func:`span_lengths`), so the control net is
+    about h fine (a finer grid gets a finer fit); ``"none"`` or None: the original net (the
+    paper's); an int n: n uniformly spaced knots inserted in every span (no elevation).
+    """
+    mode = _check_refine(refine)
+    if mode == "none":
+        return surface
+    if mode == "auto" and not h > 0.0:
+        raise InputError("h", f"must be positive, got {h!r}")
+    fitted = surface
+    for direction in (0, 1):
+        if mode == "auto":
+            raise_by = AUTO_MIN_DEGREE - fitted.degree[direction]
+            if raise_by > 0:
+                fitted = elevate_degree(fitted, direction, raise_by)
+            breaks, length = span_lengths(fitted, direction)
+            counts = np.maximum(1, np.round(length / h)).astype(np.int64)
+        else:
+            breaks = fitted.breaks()[direction]
+            counts = np.full(breaks.size - 1, mode + 1, np.int64)
+        new = [a + (b - a) * np.arange(1, n) / n for a, b, n in zip(breaks[:-1], breaks[1:], counts)]
+        new = np.concatenate(new) if new else np.zeros(0)
+        if new.size:
+            fitted = refine_knots(fitted, direction, new)
+    return fitted
+
+
+# -- basis functions at points ----------------------------------------------------------
+@dataclass(frozen=True)
+class SurfaceBasis:
+    """The non-vanishing rational basis functions of a surface at n points.
+
+    index : (n, k) int64 flat control index ``i n_v + j`` of each function, k = (p+1)(q+1)
+    values : (n, 6, k) ``R``, ``R_s``, ``R_t``, ``R_ss``, ``R_st``, ``R_tt`` (:data:`ORDERS`)
+    n_ctrl : number of control points of the surface
+    """
+
+    index: np.ndarray
+    values: np.ndarray
+    n_ctrl: int
+
+    def matrix(self, row: int = 0) -> sp.csr_matrix:
+        """(n, n_ctrl) sparse matrix of derivative ``row`` of :data:`ORDERS` (0: the values)."""
+        n, k = self.index.shape
+        indptr = np.arange(0, n * k + 1, k)
+        return sp.csr_matrix((self.values[:, row].ravel(), self.index.ravel(), indptr), shape=(n, self.n_ctrl))
+
+    def apply(self, control: np.ndarray) -> np.ndarray:
+        """``sum_i d R_i * control[i]`` for every row of :data:`ORDERS`: (n, 6, 3) from
+        ``control`` (n_ctrl, 3), e.g. ``x, x_s, x_t, x_ss, x_st, x_tt`` from ``P + V``."""
+        return np.einsum("prk,pkc->prc", self.values, np.asarray(control, float)[self.index])
+
+
+def surface_basis(surface: NurbsSurface, uv: np.ndarray) -> SurfaceBasis:
+    """Rational basis of ``surface`` and its derivatives to order 2 at ``uv`` (n, 2),
+    clipped to the parameter domain."""
+    uv = np.asarray(uv, float).reshape(-1, 2)
+    (u0, u1), (v0, v1) = surface.domain
+    uv = np.ascontiguousarray(np.column_stack([np.clip(uv[:, 0], u0, u1), np.clip(uv[:, 1], v0, v1)]))
+    p, q = surface.degree
+    k = (p + 1) * (q + 1)
+    index = np.empty((uv.shape[0], k), np.int64)
+    values = np.empty((uv.shape[0], len(ORDERS), k))
+    _k.rational_basis_batch(p, q, surface.knots_u, surface.knots_v, np.ascontiguousarray(surface.weights),
+                            uv, index, values)
+    return SurfaceBasis(index, values, int(surface.weights.size))
+
+
+def fe_shape_matrix(space: Space, x: np.ndarray) -> sp.csr_matrix:
+    """(n, n_nodes) H8 shape functions of ``space`` at points ``x`` (n, 3) (located in their
+    active elements); a point in no active element is a ValueError."""
+    slots, xi = space.locate(np.asarray(x, float))
+    if np.any(slots < 0):
+        raise ValueError(f"{int(np.sum(slots < 0))} surface points outside the active elements")
+    N = shape_functions(xi, space.h)[0]
+    n = slots.size
+    return sp.csr_matrix((N.ravel(), space.connectivity[slots].ravel(), np.arange(0, 8 * n + 1, 8)),
+                         shape=(n, space.n_nodes))
+
+
+# -- the factorization of M -------------------------------------------------------------
+@dataclass(frozen=True)
+class BandedCholesky:
+    """Cholesky factor of a banded SPD matrix in a permuted order (numba kernels of
+    :mod:`cgfem.contact._fit_kernels`: no BLAS threads, whose start-up dominated LAPACK's
+    banded routine on these small bands on a busy machine).
+
+    perm : (n,) the original index of every row of the permuted matrix
+    factor : (bandwidth + 1, n) lower band of L, ``factor[d, j] = L[j + d, j]``
+    """
+
+    perm: np.ndarray
+    factor: np.ndarray
+
+    @classmethod
+    def of(cls, M: sp.spmatrix, perm: np.ndarray) -> "BandedCholesky":
+        """Factorize ``M`` (n, n) symmetric; raises :class:`numpy.linalg.LinAlgError` if it
+        is not positive definite."""
+        A = sp.tril(sp.csr_matrix(M)[perm][:, perm]).tocoo()
+        bandwidth = int((A.row - A.col).max()) if A.nnz else 0
+        ab = np.zeros((bandwidth + 1, M.shape[0]))
+        ab[A.row - A.col, A.col] = A.data
+        failed = _k.banded_cholesky(ab)
+        if failed >= 0:
+            raise np.linalg.LinAlgError(f"not positive definite (pivot {failed})")
+        return cls(np.asarray(perm, np.int64), ab)
+
+    @property
+    def bandwidth(self) -> int:
+        return int(self.factor.shape[0] - 1)
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """``M^{-1} b`` for ``b`` (n,) or (n, m)."""
+        b = np.asarray(b, float)
+        y = np.ascontiguousarray(b[self.perm].reshape(b.shape[0], -1))
+        _k.banded_cholesky_solve(self.factor, y)
+        x = np.empty_like(y)
+        x[self.perm] = y
+        return x.reshape(b.shape)
+
+
+def band_order(n_u: int, n_v: int, degree: tuple[int, int]) -> np.ndarray:
+    """Permutation (n_u n_v,) of the u-major control numbering that minimises the bandwidth
+    of M: u-major (bandwidth ``p n_v + q``) or v-major (``q n_u + p``)."""
+    p, q = degree
+    natural = np.arange(n_u * n_v)
+    return natural if p * n_v + q <= q * n_u + p else natural.reshape(n_u, n_v).T.ravel()
+
+
+# -- the fit of one patch ---------------------------------------------------------------
+@dataclass(frozen=True)
+class PatchFit:
+    """Least-squares fit of the FE displacement on one patch (eqs. 18-20).
+
+    name, patch : the patch's name and index in its solid
+    surface : the fitting surface (geometry of the patch, refined net), n_ctrl control points
+    space : the body's FE space (n_nodes nodes)
+    M : (n_ctrl, n_ctrl) csr, ``int R_i R_j dA``; factor : its :class:`BandedCholesky`
+    G : (n_ctrl, n_nodes) csr, ``int R_i N_a dA``
+    R : (n_q, n_ctrl) csr basis at the rule points; N : (n_q, n_nodes) csr shape functions
+    uv, x, w : (n_q, 2), (n_q, 3), (n_q,) the rule points' parameters, positions and weights
+    """
+
+    name: str
+    patch: int
+    surface: NurbsSurface
+    space: Space
+    M: sp.csr_matrix
+    factor: BandedCholesky
+    G: sp.csr_matrix
+    R: sp.csr_matrix
+    N: sp.csr_matrix
+    uv: np.ndarray
+    x: np.ndarray
+    w: np.ndarray
+
+    @property
+    def n_ctrl(self) -> int:
+        return int(self.M.shape[0])
+
+    @property
+    def control_points(self) -> np.ndarray:
+        """(n_ctrl, 3) reference control points P, u-major."""
+        return self.surface.points.reshape(-1, 3)
+
+    @property
+    def area(self) -> float:
+        """Area of the patch by its rule (m^2)."""
+        return float(self.w.sum())
+
+    def displacements(self, u: np.ndarray) -> np.ndarray:
+        """Control-point displacements V (n_ctrl, 3) fitted to ``u`` (n_dofs,): ``M^{-1} G u``."""
+        return self.factor.solve(self.G @ _nodal(u, self.space))
+
+    def misfit(self, u: np.ndarray, V: np.ndarray | None = None) -> tuple[float, float]:
+        """``sqrt(int |S V - N u|^2 dA)`` and ``sqrt(int |N u|^2 dA)`` by the rule (units: a
+        displacement times the square root of an area, m^2); ``V`` defaults to the fit of ``u``."""
+        U = _nodal(u, self.space)
+        V = self.displacements(u) if V is None else V
+        fe = self.N @ U
+        err = self.R @ V - fe
+        return (float(np.sqrt(self.w @ np.einsum("pc,pc->p", err, err))),
+                float(np.sqrt(self.w @ np.einsum("pc,pc->p", fe, fe))))
+
+    def l2_error(self, u: np.ndarray, V: np.ndarray | None = None) -> float:
+        """``sqrt(int |S V - N u|^2 dA)``, the L2 distance of the fit to the FE field."""
+        return self.misfit(u, V)[0]
+
+    def relative_l2_error(self, u: np.ndarray, V: np.ndarray | None = None) -> float:
+        """:meth:`l2_error` over ``sqrt(int |N u|^2 dA)`` (0 for a zero field)."""
+        err, norm = self.misfit(u, V)
+        return err / norm if norm > 0.0 else 0.0
+
+    # -- the fitted surface (eqs. 21-22) ------------------------------------------------
+    def basis(self, uv: np.ndarray) -> SurfaceBasis:
+        """Basis of the fitting surface and its derivatives at ``uv`` (n, 2)."""
+        return surface_basis(self.surface, uv)
+
+    def derivatives(self, V: np.ndarray, uv: np.ndarray) -> np.ndarray:
+        """(n, 6, 3): ``x, x_s, x_t, x_ss, x_st, x_tt`` of ``x = S(s, t)(P + V)`` at ``uv``."""
+        return self.basis(uv).apply(self.control_points + V)
+
+    def position(self, V: np.ndarray, uv: np.ndarray) -> np.ndarray:
+        """(n, 3) points ``S(s, t)(P + V)`` at ``uv`` (n, 2)."""
+        return self.derivatives(V, uv)[:, 0]
+
+    def fe_displacement(self, u: np.ndarray, uv: np.ndarray) -> np.ndarray:
+        """(n, 3) FE displacement ``N u`` at the reference points ``S(s, t) P`` of ``uv``."""
+        X = self.position(np.zeros((self.n_ctrl, 3)), uv)
+        return fe_shape_matrix(self.space, X) @ _nodal(u, self.space)
+
+    def moved(self, V: np.ndarray) -> NurbsSurface:
+        """The fitted surface as a NURBS with control points ``P + V`` (same weights and knots)."""
+        s = self.surface
+        pts = (self.control_points + V).reshape(s.control.shape[:2] + (3,))
+        return NurbsSurface.from_points(s.degree, s.knots_u, s.knots_v, pts, s.weights)
+
+
+def _nodal(u: np.ndarray, space: Space) -> np.ndarray:
+    u = np.asarray(u, float).reshape(-1)
+    if u.size != space.n_dofs:
+        raise ValueError(f"u has {u.size} entries, the space {space.n_dofs} dofs")
+    return u.reshape(-1, 3)
+
+
+def build_fit(surface: NurbsSurface, uv: np.ndarray, w: np.ndarray, space: Space,
+              refine: str | int | None = DEFAULT_REFINE, name: str = "", patch: int = -1) -> PatchFit:
+    """The fit of the patch ``surface`` from its surface-rule points ``uv`` (n, 2) and area
+    weights ``w`` (n,) (points of zero weight are dropped), the body's ``space`` (its h sets
+    the ``auto`` refinement, :func:`fit_space`). ``name``/``patch`` label the patch in errors.
+
+    Raises ValueError if M is singular: a control function without rule points in its
+    support, or rule points too few to tell the functions apart.
+    """
+    label = f"patch {name!r} (#{patch})"
+    uv, w = np.asarray(uv, float).reshape(-1, 2), np.asarray(w, float).reshape(-1)
+    keep = w > 0.0
+    uv, w = np.ascontiguousarray(uv[keep]), w[keep]
+    fitting = fit_space(surface, space.h, refine)
+    x = surface.evaluate(uv)
+    R = surface_basis(fitting, uv).matrix()
+    N = fe_shape_matrix(space, x)
+    RtW = (R.T @ sp.diags(w)).tocsr()
+    M = (RtW @ R).tocsr()
+    G = (RtW @ N).tocsr()
+    empty = np.flatnonzero(M.diagonal() <= 0.0)
+    if empty.size:
+        n_v = fitting.control.shape[1]
+        raise ValueError(f"{label}: {empty.size} control functions have no surface-rule point in their "
+                         f"support (first: control ({empty[0] // n_v}, {empty[0] % n_v})); "
+                         f"use a coarser fit or a finer rule")
+    try:
+        factor = BandedCholesky.of(M, band_order(*fitting.control.shape[:2], fitting.degree))
+    except np.linalg.LinAlgError:
+        raise ValueError(f"{label}: the fit matrix M ({M.shape[0]} control points) is not positive definite: "
+                         f"the surface rule cannot tell its basis functions apart; use a coarser fit") from None
+    return PatchFit(name, int(patch), fitting, space, M, factor, G, R, N, uv, x, w)
+
+
+def build_fits(solid: Solid, rule: SurfaceQuadrature, space: Space, patches: Sequence[int],
+               refine: str | int | None = DEFAULT_REFINE) -> tuple[PatchFit, ...]:
+    """One :class:`PatchFit` per patch index of ``patches`` of ``solid``, from the body's
+    exact surface rule ``rule`` (``Embedding.surface``) and FE ``space``."""
+    fits = []
+    for ip in patches:
+        rows = rule.patch == ip
+        patch = solid.patches[int(ip)]
+        fits.append(build_fit(patch.surface, rule.uv[rows], rule.w[rows], space, refine, patch.name, int(ip)))
+    return tuple(fits)
+
+
+# -- output ------------------------------------------------------------------------------
+def write_fit_json(path, fits: Sequence[PatchFit], displacements: Sequence[np.ndarray]) -> Path:
+    """Write the fitted surfaces (control points ``P + V``, weights, knots and degrees of
+    every patch, :meth:`PatchFit.moved`) as a NURBS JSON file (:mod:`cgfem.geometry.io`
+    format, the patches' names kept), atomically. ``displacements``: V (n_ctrl, 3) per fit."""
+    if len(fits) != len(displacements):
+        raise ValueError(f"{len(fits)} fits but {len(displacements)} displacement sets")
+    path = Path(path)
+    write_solid(Solid(tuple(Patch(f.name or "fit", f.moved(V)) for f, V in zip(fits, displacements))), path)
+    return path
+
+
+def read_fit_json(path) -> tuple[Patch, ...]:
+    """The patches of a file of :func:`write_fit_json` (a set of patches, not a closed solid:
+    watertightness is not checked)."""
+    import json
+
+    return solid_from_dict(json.loads(Path(path).read_text(encoding="utf-8"))).patches
+
+
+def fit_mesh(fits: Sequence[PatchFit], displacements: Sequence[np.ndarray], fe_fields: Sequence[np.ndarray],
+             samples: int = 16) -> meshio.Mesh:
+    """The fitted surfaces sampled on a regular ``(samples + 1)^2`` lattice of every patch's
+    parameter domain, as quads at the current points ``S(P + V)``.
+
+    Point data: ``displacement`` (S V), ``fe_displacement`` (N u at the same reference points
+    ``S P``, ``fe_fields[k]`` the displacement (n_dofs,) of the body of ``fits[k]``), ``patch``
+    (index of the fit in ``fits``) and ``reference`` (the reference points ``S P``): the data of
+    the paper's Fig. 10.
+    """
+    if not len(fits) == len(displacements) == len(fe_fields):
+        raise ValueError("fits, displacements and fe_fields must have one entry per fit")
+    if not fits:
+        raise ValueError("no fits to sample")
+    if samples < 1:
+        raise ValueError(f"samples must be >= 1, got {samples}")
+    m = samples + 1
+    s = np.linspace(0.0, 1.0, m)
+    cell = np.array([0, m, m + 1, 1])                                  # lattice (i, j) -> i m + j
+    base = (np.arange(samples)[:, None] * m + np.arange(samples)[None, :]).ravel()
+    points, quads, data = [], [], {"displacement": [], "fe_displacement": [], "patch": [], "reference": []}
+    shift = 0
+    for k, (fit, V, u) in enumerate(zip(fits, displacements, fe_fields)):
+        (u0, u1), (v0, v1) = fit.surface.domain
+        uv = np.stack(np.meshgrid(u0 + s * (u1 - u0), v0 + s * (v1 - v0), indexing="ij"), -1).reshape(-1, 2)
+        B = fit.basis(uv)
+        X = B.apply(fit.control_points)[:, 0]
+        moved = B.apply(V)[:, 0]
+        points.append(X + moved)
+        quads.append(base[:, None] + cell[None, :] + shift)
+        data["displacement"].append(moved)
+        data["fe_displacement"].append(fe_shape_matrix(fit.space, X) @ _nodal(u, fit.space))
+        data["patch"].append(np.full(uv.shape[0], k, np.int32))
+        data["reference"].append(X)
+        shift += uv.shape[0]
+    return meshio.Mesh(np.concatenate(points), [("quad", np.concatenate(quads))],
+                       point_data={key: np.concatenate(v) for key, v in data.items()})
+
+
+def write_fit_vtu(path, mesh: meshio.Mesh) -> Path:
+    """Write a :func:`fit_mesh` as VTU, atomically."""
+    return write_vtu_files({Path(path): mesh})[0]
