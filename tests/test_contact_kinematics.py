@@ -106,3 +106,39 @@ def test_gap_is_the_distance_along_the_normal(definition):
         assert error < 1e-12
     else:
         assert 1e-5 < error < 0.02      # facets chord error ~ h^2 / (8 R) with h = 0.25
+
+
+def test_chattering_points_are_held_then_released():
+    """Points whose status flips at every linearization point are held after MAX_SWITCHES
+    flips, as they were, in the residual too (an active one keeps lambda = p_N + eps g even in
+    tension); ``contradicted`` counts held points against their own rule; a new pass releases
+    them."""
+    from cgfem.contact.pair import MAX_SWITCHES
+    pair = _pair("nurbs_fe", False)
+    n_s, n_m = pair.slave_space.n_dofs, pair.master_space.n_dofs
+    rng = np.random.default_rng(5)
+    u0 = 0.01 * rng.standard_normal(n_s + n_m)
+    u1 = u0.copy()
+    u1[:n_s] += 0.004 * rng.standard_normal(n_s)
+    pair.state.p_N = np.zeros(pair.n_points)
+    pair.begin_pass()
+    states = []
+    for k in range(MAX_SWITCHES + 2):
+        pair.assemble(*(np.split(u0 if k % 2 == 0 else u1, [n_s])), True)
+        states.append(pair.state.natural.copy())
+    flips = states[0] != states[1]
+    assert flips.sum() >= 5                                # the scene makes points chatter
+    held = pair.state.held
+    np.testing.assert_array_equal(held, flips)              # exactly the chattering ones
+    # the first evaluation sets the status, the next MAX_SWITCHES flip it: held at the last
+    # of those (at u0); the one after (at u1) contradicts their rule
+    np.testing.assert_array_equal(pair.state.held_active[held], states[0][held])
+    assert pair.contradicted() == flips.sum()
+    # residual: a held-active point in tension carries lambda = p_N + eps g > 0
+    pair.assemble(*np.split(u1, [n_s]), False, update=False)
+    lam, active, natural = pair._multiplier(pair.state.hits)
+    tension = held & active & ~natural
+    assert tension.any() and np.all(lam[tension] > 0.0)
+    assert np.all(lam[held & ~active] == 0.0)
+    pair.begin_pass()
+    assert pair.contradicted() == 0 and not pair.state.held.any()

@@ -33,9 +33,14 @@ class ContactSet:
         o = self.offsets
         return u[o[pair.slave]:o[pair.slave + 1]], u[o[pair.master]:o[pair.master + 1]]
 
-    def begin_increment(self) -> None:
+    def begin_pass(self) -> None:
+        """A new Newton solve: every pair's switch counts reset and held points released."""
         for p in self.pairs:
-            p.begin_increment()
+            p.begin_pass()
+
+    def contradicted(self) -> int:
+        """Held points (all pairs) whose own rule disagrees with the status they hold."""
+        return sum(p.contradicted() for p in self.pairs)
 
     def freeze(self, u: np.ndarray, recovered: list[np.ndarray | None]) -> None:
         """Freeze every pair's ``p_N`` from the slaves' recovered stress at ``u``."""

@@ -25,9 +25,12 @@ The active set is re-evaluated at every residual evaluation (a semismooth Newton
 a point counts as active up to ``p_N + eps g <= eps CLOSED_GAP_H h``, so surfaces that touch
 initially (a gap of round-off size) start in contact.
 Chattering protection: once a point has switched :data:`MAX_SWITCHES` times within one
-load increment, its tangent contribution is held active for the rest of the increment,
-while its residual stays exact: the converged solution is unchanged, only the convergence
-rate of that point is given up.
+Newton solve (one pass of the outer loop), its status is held as it is for the rest of that
+solve, in the residual and the tangent alike (an active point keeps ``lambda_N = p_N + eps g``
+whatever its sign), so Newton sees a smooth problem and converges. The held status may
+contradict the point's own rule at the converged state; :meth:`ContactPair.contradicted`
+counts such points, and the outer loop does not call contact settled while there are any:
+its next pass releases every point and solves again from there.
 """
 
 from __future__ import annotations
@@ -44,7 +47,7 @@ from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface, RayHits, elemen
 #: slave points whose (48, 48) tangents are formed at once (memory: about 0.3 GB per chunk
 #: with the temporaries of the second derivatives)
 CHUNK_POINTS = 2048
-#: switches of one point's active status in one increment before its tangent is held active
+#: switches of one point's active status in one Newton solve before its status is held
 MAX_SWITCHES = 10
 #: largest |gap| searched, in element sizes: a point is active only while
 #: p_N + (kappa E / h) g <= 0, i.e. for gaps below |p_N| h / (kappa E), far below h
@@ -63,6 +66,11 @@ class ContactState:
     hits: RayHits | None = None
     active: np.ndarray | None = None
     switches: np.ndarray | None = None
+    #: points whose status is held (``held``) and the status they hold (``held_active``)
+    held: np.ndarray | None = None
+    held_active: np.ndarray | None = None
+    #: the points' own rule at the last linearization point, held or not
+    natural: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -146,8 +154,19 @@ class ContactPair:
             stress = np.einsum("pij,pkj->pik", stress, F) / np.linalg.det(F)[:, None, None]
         self.state.p_N = np.einsum("pi,pij,pj->p", st.n, stress, st.n)
 
-    def begin_increment(self) -> None:
-        self.state.switches = np.zeros(self.n_points, np.int64)
+    def begin_pass(self) -> None:
+        """A new Newton solve: switch counts to zero, every held point released."""
+        n = self.n_points
+        self.state.switches = np.zeros(n, np.int64)
+        self.state.held, self.state.held_active = np.zeros(n, bool), np.zeros(n, bool)
+
+    def contradicted(self) -> int:
+        """Held points whose own rule disagrees with the status they hold (last
+        linearization point)."""
+        st = self.state
+        if st.held is None or st.natural is None:
+            return 0
+        return int(np.sum(st.held & (st.natural != st.held_active)))
 
     # -- residual and tangent --------------------------------------------------------------
     def assemble(self, u_s: np.ndarray, u_m: np.ndarray, tangent: bool, update: bool = True):
@@ -155,15 +174,12 @@ class ContactPair:
         COO triplets ``(rows, cols, values)`` on the local dofs ``(slave dofs, master dofs
         + n_s)``. ``update``: record the pairing and active set (a Newton iterate)."""
         st, hits = self.search(u_s, u_m)
-        lam, active = self._multiplier(hits)
+        lam, active, natural = self._multiplier(hits)
         if update:
-            self._record(hits, active)
-        held = active.copy()
-        if self.state.switches is not None:
-            held |= self.state.switches >= MAX_SWITCHES
+            self._record(hits, active, natural)
         r_s = np.zeros(u_s.size)
         r_m = np.zeros(u_m.size)
-        rows = np.flatnonzero(held & hits.found)
+        rows = np.flatnonzero(active)
         n = u_s.size + u_m.size
         K = sp.csr_matrix((n, n))
         # points in chunks: each carries (48, 48) blocks and their temporaries (a few kB)
@@ -192,33 +208,38 @@ class ContactPair:
         np.add.at(r_m, dofs_m, f[:, 24:])
         if not tangent:
             return None
-        K = (d.w * self.eps)[:, None, None] * d.dg[:, :, None] * d.dg[:, None, :]
-        # a held point that is not active has no force but keeps its penalty stiffness
-        loaded = lam_r != 0.0
-        K[loaded] += (d.w * lam_r)[loaded, None, None] * d.d2g[loaded] \
-            + lam_r[loaded, None, None] * d.dg[loaded, :, None] * d.dw[loaded, None, :]
+        K = (d.w * self.eps)[:, None, None] * d.dg[:, :, None] * d.dg[:, None, :] \
+            + (d.w * lam_r)[:, None, None] * d.d2g + lam_r[:, None, None] * d.dg[:, :, None] * d.dw[:, None, :]
         dofs = np.concatenate([dofs_s, dofs_m + u_s.size], axis=1)                # (k, 48)
         rr = np.repeat(dofs, 48, axis=1).ravel()
         cc = np.tile(dofs, (1, 48)).ravel()
         n = u_s.size + u_m.size
         return sp.coo_matrix((K.ravel(), (rr, cc)), shape=(n, n)).tocsr()
 
-    def _multiplier(self, hits: RayHits) -> tuple[np.ndarray, np.ndarray]:
-        trial = np.where(hits.found, self.state.p_N + self.eps * np.where(hits.found, hits.g, 0.0), np.inf)
-        active = hits.found & (trial <= self.eps * CLOSED_GAP_H * self.slave_space.h)
-        return np.where(active, trial, 0.0), active
+    def _multiplier(self, hits: RayHits) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``lambda_N`` (n,), the status used (n,) (held points as held) and the points' own
+        rule (n,)."""
+        st = self.state
+        trial = np.where(hits.found, st.p_N + self.eps * np.where(hits.found, hits.g, 0.0), np.inf)
+        natural = hits.found & (trial <= self.eps * CLOSED_GAP_H * self.slave_space.h)
+        active = natural if st.held is None else np.where(st.held, st.held_active & hits.found, natural)
+        return np.where(active, trial, 0.0), active, natural
 
-    def _record(self, hits: RayHits, active: np.ndarray) -> None:
+    def _record(self, hits: RayHits, active: np.ndarray, natural: np.ndarray) -> None:
         st = self.state
         if st.active is not None and st.switches is not None:
             st.switches += active != st.active
-        st.active, st.hits = active, hits
+            if st.held is not None:
+                hold = ~st.held & (st.switches >= MAX_SWITCHES)
+                st.held |= hold
+                st.held_active[hold] = active[hold]
+        st.active, st.hits, st.natural = active, hits, natural
 
     # -- outputs ---------------------------------------------------------------------------
     def points(self, u_s: np.ndarray, u_m: np.ndarray) -> ContactPoints:
         """The slave points at ``(u_s, u_m)`` with their gaps, pressures and weights."""
         st, hits = self.search(u_s, u_m)
-        lam, active = self._multiplier(hits)
+        lam, active, _ = self._multiplier(hits)
         w = area_weight(self.frames, st.norm_m, self.finite)
         force = np.zeros((self.n_points, 3))
         rows = np.flatnonzero(active)

@@ -304,13 +304,13 @@ def _solve_increment(system: System, solver: _Solver, u0: np.ndarray,
     relaxation = Relaxation(ACCELERATE)
     following = recovered
     contact = system.contact
-    contact.begin_increment()
     active = contact.active()
     settled = True
     for outer in range(1, options.outer_passes + 1):
         frozen = following
         if contact:
             contact.freeze(u, frozen)      # p_N = n . sigma* . n, with the same frozen sigma*
+            contact.begin_pass()
 
         def assemble(v, tangent, frozen=frozen):
             return system.assemble(v, t, frozen, tangent)
@@ -339,9 +339,11 @@ def _solve_increment(system: System, solver: _Solver, u0: np.ndarray,
         if contact:
             previous, active = active, contact.active()
             switched = active_changes(active, previous)
-            settled = outer > 1 and switched == 0
+            contradicted = contact.contradicted()
+            settled = outer > 1 and switched == 0 and contradicted == 0
+            held = f", {contradicted} held against their rule" if contradicted else ""
             log(f"t={t:.4g} pass {outer}: recovered stress changed by {changes[-1]:.3e}, "
-                f"{int(sum(a.sum() for a in active))} active contact points ({switched} switched)")
+                f"{int(sum(a.sum() for a in active))} active contact points ({switched} switched{held})")
         else:
             log(f"t={t:.4g} pass {outer}: recovered stress changed by {changes[-1]:.3e}")
         if changes[-1] <= options.outer_tol and settled:
