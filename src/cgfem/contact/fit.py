@@ -26,6 +26,7 @@ milliseconds and a few MB.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -227,8 +228,11 @@ class PatchFit:
     space : the body's FE space (n_nodes nodes)
     M : (n_ctrl, n_ctrl) csr, ``int R_i R_j dA``; factor : its :class:`BandedCholesky`
     G : (n_ctrl, n_nodes) csr, ``int R_i N_a dA``
-    R : (n_q, n_ctrl) csr basis at the rule points; N : (n_q, n_nodes) csr shape functions
     uv, x, w : (n_q, 2), (n_q, 3), (n_q,) the rule points' parameters, positions and weights
+
+    The point matrices R (n_q, n_ctrl) and N (n_q, n_nodes) are rebuilt on demand
+    (:meth:`rule_matrices`), not kept: at chain2_steel level 3 they would hold about 100 MB
+    per patch (482 000 rule points).
     """
 
     name: str
@@ -238,8 +242,6 @@ class PatchFit:
     M: sp.csr_matrix
     factor: BandedCholesky
     G: sp.csr_matrix
-    R: sp.csr_matrix
-    N: sp.csr_matrix
     uv: np.ndarray
     x: np.ndarray
     w: np.ndarray
@@ -258,6 +260,11 @@ class PatchFit:
         """Area of the patch by its rule (m^2)."""
         return float(self.w.sum())
 
+    def rule_matrices(self) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+        """R (n_q, n_ctrl): the fitting basis, and N (n_q, n_nodes): the H8 shape functions,
+        at the rule points (``M = R^T W R``, ``G = R^T W N``, W the weights)."""
+        return surface_basis(self.surface, self.uv).matrix(), fe_shape_matrix(self.space, self.x)
+
     def displacements(self, u: np.ndarray) -> np.ndarray:
         """Control-point displacements V (n_ctrl, 3) fitted to ``u`` (n_dofs,): ``M^{-1} G u``."""
         return self.factor.solve(self.G @ _nodal(u, self.space))
@@ -267,8 +274,9 @@ class PatchFit:
         displacement times the square root of an area, m^2); ``V`` defaults to the fit of ``u``."""
         U = _nodal(u, self.space)
         V = self.displacements(u) if V is None else V
-        fe = self.N @ U
-        err = self.R @ V - fe
+        R, N = self.rule_matrices()
+        fe = N @ U
+        err = R @ V - fe
         return (float(np.sqrt(self.w @ np.einsum("pc,pc->p", err, err))),
                 float(np.sqrt(self.w @ np.einsum("pc,pc->p", fe, fe))))
 
@@ -344,7 +352,7 @@ def build_fit(surface: NurbsSurface, uv: np.ndarray, w: np.ndarray, space: Space
     except np.linalg.LinAlgError:
         raise ValueError(f"{label}: the fit matrix M ({M.shape[0]} control points) is not positive definite: "
                          f"the surface rule cannot tell its basis functions apart; use a coarser fit") from None
-    return PatchFit(name, int(patch), fitting, space, M, factor, G, R, N, uv, x, w)
+    return PatchFit(name, int(patch), fitting, space, M, factor, G, uv, x, w)
 
 
 def build_fits(solid: Solid, rule: SurfaceQuadrature, space: Space, patches: Sequence[int],
@@ -374,8 +382,6 @@ def write_fit_json(path, fits: Sequence[PatchFit], displacements: Sequence[np.nd
 def read_fit_json(path) -> tuple[Patch, ...]:
     """The patches of a file of :func:`write_fit_json` (a set of patches, not a closed solid:
     watertightness is not checked)."""
-    import json
-
     return solid_from_dict(json.loads(Path(path).read_text(encoding="utf-8"))).patches
 
 
