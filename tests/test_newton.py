@@ -1,0 +1,56 @@
+"""Newton with its line search on scalar and small vector problems with known roots."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cgfem.solve.newton import NONMONOTONE, newton, observed_order
+
+
+def _scalar(r, dr):
+    def assemble(u, tangent):
+        return np.array([r(u[0])]), (np.array([[dr(u[0])]]) if tangent else None)
+    return assemble
+
+
+def _solve(K, b):
+    return np.linalg.solve(K, b)
+
+
+def test_full_steps_converge_quadratically():
+    """x^3 + x - 3 = 0 from 1: the full steps are taken, the order is 2."""
+    res = newton(_scalar(lambda x: x ** 3 + x - 3.0, lambda x: 3 * x ** 2 + 1.0), np.array([1.0]), _solve,
+                 tol=1e-14, reference=1.0, max_iter=20)
+    assert res.converged and abs(res.u[0] ** 3 + res.u[0] - 3.0) <= 1e-14
+    assert observed_order(res.residuals, floor=1e-15) > 1.8
+
+
+def test_line_search_tames_arctan():
+    """arctan(x) from x = 3: plain Newton diverges (|x| grows from any |x0| > 1.39); the
+    line search halves the steps that raise the residual above the last NONMONOTONE ones and
+    reaches the root."""
+    x = np.array([3.0])
+    for _ in range(3):                               # plain Newton: diverges
+        x = x - np.arctan(x) * (1.0 + x ** 2)
+    assert abs(x[0]) > 1e3
+    res = newton(_scalar(np.arctan, lambda x: 1.0 / (1.0 + x ** 2)), np.array([3.0]), _solve,
+                 tol=1e-12, reference=1.0, max_iter=40)
+    assert res.converged and abs(res.u[0]) < 1e-12
+    # every accepted residual is below the largest of the NONMONOTONE before it
+    r = res.residuals
+    assert all(r[k] < max(r[max(0, k - NONMONOTONE):k]) for k in range(1, len(r)))
+
+
+def test_inadmissible_trials_are_halved():
+    """x^2 - 3.61 (root 1.9) with a NaN residual beyond x = 2 (an inverted element): the first
+    full step from 0.5 lands at 3.86 and its half at 2.18, both NaN; the quarter step is
+    taken and Newton converges."""
+    calls = []
+
+    def r(x):
+        calls.append(x)
+        return np.nan if x > 2.0 else x * x - 3.61
+    res = newton(_scalar(r, lambda x: 2.0 * x), np.array([0.5]), _solve, tol=1e-13, reference=1.0, max_iter=20)
+    assert np.allclose(calls[1:4], [3.86, 2.18, 1.34])
+    assert np.isfinite(res.residuals).all()
+    assert res.converged and abs(res.u[0] - 1.9) < 1e-12
