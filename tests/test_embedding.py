@@ -67,15 +67,6 @@ def test_nurbs_volume_and_area_are_exact(name, level, seeds):
             assert emb.area_by_name()[patch_name] == pytest.approx(area, rel=1e-8)
 
 
-def test_half_torus_level_3_is_exact():
-    spec = _shapes(7)["half_torus"]
-    solid = build_solid(spec)
-    exact_volume, exact_area = _closed_forms("half_torus", spec)
-    emb = embed(solid, grid_for(solid, 0.005, 3, (0.31, 0.77, 0.52)))
-    assert emb.volume.w.sum() == pytest.approx(exact_volume, rel=1e-8)
-    assert emb.surface.w.sum() == pytest.approx(exact_area, rel=1e-8)
-
-
 def test_points_lie_in_their_elements_and_statuses_agree():
     solid = build_solid(_shapes(3)["half_torus"])
     emb = embed(solid, grid_for(solid, 0.005, 1, (0.2, 0.4, 0.9)))
