@@ -115,3 +115,20 @@ def test_finite_strain_pair_tangent_is_the_derivative_of_the_residual():
     # the check can fail: the tangent of the wrong material point is far off
     assert np.linalg.norm(fd - System([box, ball]).assemble(0 * u, 0.8, frozen, True)[1] @ v) \
         > 1e-2 * np.linalg.norm(Kv)
+
+
+@pytest.mark.parametrize("components, free", [({"x": 0, "y": 0, "z": 0}, 0), ({"x": 0, "y": 0}, 1), (None, 6)])
+def test_free_rigid_modes_of_a_body(components, free):
+    """A box on face xmin: clamped holds every rigid motion; held along x and y only it
+    keeps the z translation free (every rotation moves the face along x or y); without
+    conditions all six are free: the bodies contact must hold (tangent shift)."""
+    data = {"name": "free", "kinematics": "small", "steps": 1,
+            "bodies": {"box": {"geometry": {"builder": "box", "min": [0, 0, 0], "max": [1.0, 0.6, 0.5]},
+                               "material": {"model": "linear_elastic", "E": 1e9, "nu": 0.3},
+                               "grid": {"h0": 0.25, "offset": [0.13, 0.29, 0.41]}}},
+            "boundary": [] if components is None else
+            [{"body": "box", "patches": ["xmin"], "type": "displacement", "components": components}]}
+    case = parse_case(data, Path("."))
+    body = build_models(case, 0, "nurbs_fe", lambda message: None)[0][0]
+    _, K = body.assemble(np.zeros(body.n_dofs), 1.0, None, True)
+    assert System([body]).free_rigid_modes(0, sp.csr_matrix(K)) == free

@@ -89,8 +89,9 @@ class System:
         sizes = [b.n_dofs for b in bodies]
         self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         self.contact = ContactSet(list(pairs or []), self.offsets)
-        #: bodies without any Dirichlet condition (held by contact only)
-        self.floating = [i for i, b in enumerate(bodies) if not b.dirichlet] if self.contact else []
+        #: bodies with a rigid motion their own conditions do not hold (held by contact
+        #: alone in it), found from the first tangent (:meth:`free_rigid_modes`)
+        self.floating: list[int] | None = None if self.contact else []
         self._K: sp.csr_matrix | None = None
         self._shift: sp.csr_matrix | None = None
 
@@ -130,13 +131,27 @@ class System:
         if self.linear:
             self._K = K
         if Kc is not None:
+            if self.floating is None:
+                self.floating = [i for i, p in enumerate(parts) if self.free_rigid_modes(i, p[1])]
             K = K + Kc.tocsr()
             if self.floating:
                 K = K + self._floating_shift(K)
         return r, K
 
+    def free_rigid_modes(self, i: int, K: sp.csr_matrix) -> int:
+        """How many rigid motions body ``i``'s own tangent ``K`` (its conditions included, no
+        contact) leaves free: eigenvalues of ``P^T K P`` on its orthonormalized rigid modes
+        ``P`` (3 n, 6) below ``FREE_MODE`` times its mean diagonal. A body without Dirichlet
+        conditions has six; one held along x and y on one face only may keep a translation and a
+        rotation free."""
+        P, _ = np.linalg.qr(rigid_body_modes(self.bodies[i].space.coordinates))
+        S = P.T @ (K @ P)
+        scale = float(np.mean(np.abs(K.diagonal())))
+        return int(np.sum(np.linalg.eigvalsh(0.5 * (S + S.T)) < FREE_MODE * scale))
+
     def _floating_shift(self, K: sp.csr_matrix) -> sp.csr_matrix:
-        """Tangent-only stabilization of bodies held by contact alone: ``FLOATING_SHIFT``
+        """Tangent-only stabilization of bodies held by contact alone in some rigid motion
+        (:meth:`free_rigid_modes`): ``FLOATING_SHIFT``
         times the diagonal of their first tangent is added to the matrix Newton solves, never
         to the residual. It makes the rigid motions of such a body solvable before contact
         forces hold it (and a frictionless spinning mode always), and leaves the converged
@@ -233,6 +248,8 @@ Log = Callable[[str], None]
 MODIFIED_NEWTON_ITERATIONS = 6
 #: diagonal shift of the tangent of bodies held by contact only (:meth:`System._floating_shift`)
 FLOATING_SHIFT = 1e-8
+#: a rigid motion whose stiffness is below this fraction of the mean diagonal is free
+FREE_MODE = 1e-10
 #: relax the outer loop's fixed point (:class:`Relaxation`); False: plain substitution
 ACCELERATE = True
 
