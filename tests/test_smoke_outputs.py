@@ -177,6 +177,20 @@ def test_chain2_links_are_in_equilibrium(runs):
             assert np.abs(pulled + run.contact_force(k)).max() <= CHAIN2_BALANCE * scale, (run.folder, k)
 
 
+def test_chain2_steel_newton_ends_quadratically(runs):
+    """chain2_steel, every definition and level the results hold: the first Newton solve of
+    every step (full Newton; later passes start from the kept factorization) ends with an
+    observed order >= 1.8 over its last three residuals above round-off (1e-11 of its first)."""
+    from cgfem.solve.newton import observed_order
+    steel = [r for r in runs if r.case == "chain2_steel" and r.n_steps > 0]
+    assert steel, "no chain2_steel runs"
+    for run in steel:
+        orders = [observed_order(step["pass_residuals"][0], floor=1e-11) for step in run.steps]
+        measured = [q for q in orders if math.isfinite(q)]
+        assert measured, f"{run.folder}: no step with three residuals above round-off"
+        assert min(measured) >= 1.8, f"{run.folder}: orders per step {orders}"
+
+
 def _planar(runs, surfaces=None) -> list[Run]:
     planar = [r for r in runs if r.case == "planar" and not r.failed
               and (surfaces is None or r.surface in surfaces)]
