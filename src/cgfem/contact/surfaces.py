@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -220,36 +221,41 @@ class NurbsFeSurface:
                previous: RayHits | None = None) -> RayHits:
         """Ray tracing from ``x1`` along ``n1`` (n, 3) to the current master surface, the
         segment ``|g| <= max_gap`` of each ray. Starts, in order: the previous pairing (if
-        found), then the seeds nearest to samples of the segment taken at the seeds' spacing,
+        found; tried alone first, the seeds are looked up only for the rays it does not
+        pair), then the seeds nearest to samples of the segment taken at the seeds' spacing,
         nearest to the ray first (those within twice the spacing of it, each seed once, from
         the first ``4 CANDIDATES`` samples' seeds); a ray no seed lies near has none. The first
         admissible hit of a point is kept (:func:`cgfem.contact._ray_kernels.trace`)."""
         n = x1.shape[0]
         best = RayHits(np.zeros(n, bool), np.zeros(n, np.int64), np.zeros((n, 2)), np.full(n, np.inf),
                        np.full(n, -1, np.int64))
-        rows = np.flatnonzero(self._may_hit(u, x1, max_gap, n1))
-        if rows.size == 0:
-            return best
-        x1, n1 = np.ascontiguousarray(x1[rows], dtype=float), np.ascontiguousarray(n1[rows], dtype=float)
-        piece, theta = self._starts(u, x1, n1, max_gap)
-        start_slot = np.full(piece.shape, -1, np.int64)
-        if previous is not None:
-            prev = previous.found[rows]
-            piece = np.concatenate([np.where(prev, previous.piece[rows], -1)[:, None], piece], axis=1)
-            theta = np.concatenate([previous.theta[rows][:, None], theta], axis=1)
+        todo = np.arange(n)
+        if previous is not None and previous.found.any():
+            # the previous pairing alone first: from the second Newton iterate on it is
+            # almost always the hit, and the seeds are then needed only for the rest
+            rows = np.flatnonzero(previous.found)
             before = previous.slot[rows] if previous.slot is not None else np.full(rows.size, -1, np.int64)
-            start_slot = np.concatenate([np.where(prev, before, -1)[:, None], start_slot], axis=1)
-            # a point without a previous pairing starts from the seeds: shift them left
-            order = np.argsort(piece < 0, axis=1, kind="stable")
-            piece = np.take_along_axis(piece, order, axis=1)
-            theta = np.take_along_axis(theta, order[:, :, None], axis=1)
-            start_slot = np.take_along_axis(start_slot, order, axis=1)
-        found, pc, th, g = np.zeros(rows.size, bool), np.zeros(rows.size, np.int64), np.zeros((rows.size, 2)), \
-            np.full(rows.size, np.inf)
-        status = np.zeros(rows.size, np.int64)
-        slot = np.full(rows.size, -1, np.int64)
+            self._trace(u, x1, n1, rows, previous.piece[rows][:, None], previous.theta[rows][:, None],
+                        before[:, None], max_gap, best)
+            todo = np.flatnonzero(~best.found)
+        rows = todo[self._may_hit(u, x1[todo], max_gap, n1[todo])] if todo.size else todo
+        if rows.size:
+            piece, theta = self._starts(u, np.ascontiguousarray(x1[rows], dtype=float),
+                                        np.ascontiguousarray(n1[rows], dtype=float), max_gap)
+            self._trace(u, x1, n1, rows, piece, theta, np.full(piece.shape, -1, np.int64), max_gap, best)
+        return best
+
+    def _trace(self, u: np.ndarray, x1: np.ndarray, n1: np.ndarray, rows: np.ndarray, piece: np.ndarray,
+               theta: np.ndarray, start_slot: np.ndarray, max_gap: float, best: RayHits) -> None:
+        """Newton from the starts ``piece`` (k, c), ``theta`` (k, c, 2), ``start_slot`` (k, c)
+        of the rays ``rows`` (k,); their first admissible hits written into ``best``."""
+        k = rows.size
+        found, pc, th, g = np.zeros(k, bool), np.zeros(k, np.int64), np.zeros((k, 2)), np.full(k, np.inf)
+        status = np.zeros(k, np.int64)
+        slot = np.full(k, -1, np.int64)
         grid = self.space.grid
-        _rk.trace(x1, n1, np.ascontiguousarray(piece), np.ascontiguousarray(theta),
+        _rk.trace(np.ascontiguousarray(x1[rows], dtype=float), np.ascontiguousarray(n1[rows], dtype=float),
+                  np.ascontiguousarray(piece), np.ascontiguousarray(theta),
                   np.ascontiguousarray(start_slot), float(max_gap), RAY_TOL,
                   MAX_RAY_NEWTON, self._layout, self._knots, self._control, np.asarray(grid.origin, float),
                   float(self.h), np.asarray(grid.shape, np.int64), self.space.elements, LOCATE_TOL,
@@ -259,7 +265,6 @@ class NurbsFeSurface:
             raise ValueError(f"{int(np.sum(status == _rk.OUTSIDE))} surface points outside the active elements")
         best.found[rows], best.piece[rows], best.theta[rows], best.g[rows] = found, pc, th, g
         best.slot[rows] = np.where(found, slot, -1)
-        return best
 
     def _may_hit(self, u: np.ndarray, x1: np.ndarray, max_gap: float, n1: np.ndarray) -> np.ndarray:
         """(n,) bool: the ray segment ``x1 + g n1``, ``|g| <= max_gap`` ((n, 3) each), may
@@ -295,16 +300,6 @@ class NurbsFeSurface:
             hit = _segment_meets_box(x1[rest], n1[rest], centre[e][None], half[e][None], length)
             may[rest[hit]] = True
         return may
-        el = np.concatenate([np.asarray(b, np.int64) for b in boxes if len(b)])
-        d, n, c, w = x1[pt], n1[pt], centre[el], half[el]
-        inside = np.abs(d - c) <= w                                     # per axis
-        with np.errstate(divide="ignore", invalid="ignore"):
-            a, b = (c - w - d) / n, (c + w - d) / n
-        # the segment's parameters inside each slab (a ray parallel to a slab: all or none)
-        enter = np.where(n == 0.0, np.where(inside, -np.inf, np.inf), np.minimum(a, b)).max(axis=1)
-        leave = np.where(n == 0.0, np.where(inside, np.inf, -np.inf), np.maximum(a, b)).min(axis=1)
-        may[pt[np.maximum(enter, -length) <= np.minimum(leave, length)]] = True
-        return may
 
     def _starts(self, u: np.ndarray, x1: np.ndarray, n1: np.ndarray, max_gap: float
                 ) -> tuple[np.ndarray, np.ndarray]:
@@ -323,7 +318,7 @@ class NurbsFeSurface:
         # sliding-midpoint splits: a median-split tree over points on a surface queried from
         # off the surface is several times slower (the nearest seed is the same)
         tree = cKDTree(seeds_x, leafsize=32, balanced_tree=False, compact_nodes=False)
-        _, idx = tree.query(samples.reshape(-1, 3))
+        _, idx = tree.query(samples.reshape(-1, 3), workers=numba.get_num_threads())
         idx = idx.reshape(n, m)
         v = seeds_x[idx] - x1[:, None, :]
         off_ray = np.linalg.norm(v - np.einsum("pjk,pk->pj", v, n1)[:, :, None] * n1[:, None, :], axis=2)
