@@ -222,7 +222,7 @@ def test_cut_back_reaches_the_step_in_equal_sub_steps(monkeypatch):
 
     def increment(system, solver, u, stress, t, options, log):
         if t - (taken[-1] if taken else 0.0) > 0.3:
-            return None                       # too large an increment: Newton fails
+            return "Newton stopped"           # too large an increment: Newton fails
         taken.append(t)
         return static.Increment(u, stress, stress, [[1.0, 0.0]], [0.0], True)
 
@@ -233,3 +233,4 @@ def test_cut_back_reaches_the_step_in_equal_sub_steps(monkeypatch):
     taken.clear()
     result = static.solve_static(OneDof(), 1, SolverOptions(max_cutbacks=1))
     assert result.status == "failed" and taken == []
+    assert result.message.endswith("after 1 cut-backs (last attempt: Newton stopped)")

@@ -95,6 +95,7 @@ def test_run_that_fails_keeps_converged_steps_and_exits_1(tmp_path, capsys):
     assert code == 1
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "failed" and "cut-backs" in summary["message"]
+    assert "(last attempt: Newton stopped on " in summary["message"]      # says why
     steps = summary["steps"]
     assert 1 <= len(steps) < 4 and all(s["load_factor"] < 1.0 for s in steps)
     assert sorted(p.name for p in out.glob("step_*.vtu")) == [f"step_{i + 1:03d}.vtu" for i in range(len(steps))]

@@ -275,11 +275,11 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
             t_new = target if target - t <= size * (1.0 + 1e-9) else t + size
             start = time.perf_counter()
             outcome = _solve_increment(system, solver, u, recovered, t_new, options, log)
-            if outcome is None:
+            if isinstance(outcome, str):
                 cutbacks += 1
                 if cutbacks > options.max_cutbacks:
                     return StaticResult(FAILED, records, f"no convergence at load factor {t_new:.6g} "
-                                        f"after {options.max_cutbacks} cut-backs")
+                                        f"after {options.max_cutbacks} cut-backs (last attempt: {outcome})")
                 size *= 0.5
                 log(f"cut-back {cutbacks}: load increment {size:.4g}")
                 continue
@@ -306,10 +306,10 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
 
 def _solve_increment(system: System, solver: _Solver, u0: np.ndarray,
                      recovered0: list[np.ndarray | None], t: float, options: SolverOptions,
-                     log: Log) -> Increment | None:
+                     log: Log) -> Increment | str:
     """Outer loop at load factor ``t`` from ``u0`` and the recovery ``recovered0`` of the
     previous step, until the recovered stress changes by <= ``options.outer_tol`` or
-    ``options.outer_passes`` solves are done; None when Newton fails."""
+    ``options.outer_passes`` solves are done; why it stopped (a string) when Newton fails."""
     u, frozen, recovered = u0, list(recovered0), list(recovered0)
     changes: list[float] = []
     residuals: list[list[float]] = []
@@ -347,7 +347,9 @@ def _solve_increment(system: System, solver: _Solver, u0: np.ndarray,
                 break
         if not result.converged:
             log(f"t={t:.4g}: Newton stopped ({result.reason})")
-            return None
+            last = result.residuals[-1] / result.reference if result.reference > 0.0 else float("nan")
+            return (f"Newton stopped on {result.reason} in outer pass {outer} at |r|/ref = {last:.2e} "
+                    f"after {len(result.residuals) - 1} iterations")
         reference = result.reference
         u = result.u
         residuals.append(result.residuals)
