@@ -240,7 +240,7 @@ def part_iteration(level: int, definition: str, repeat: int) -> dict:
     us = system.split(u)
     t = 0.2                                               # load factor of the first step
     frozen = system.recover(u)
-    system.contact.begin_increment()
+    system.contact.begin_pass()
     system.contact.freeze(u, [None] * len(system.bodies))   # p_N = 0: the first outer pass
     near_null = system.near_null()
     backend = choose_backend(system.n_dofs, system.symmetric, "auto")
