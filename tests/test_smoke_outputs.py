@@ -191,6 +191,31 @@ def test_chain2_steel_newton_ends_quadratically(runs):
         assert min(measured) >= 1.8, f"{run.folder}: orders per step {orders}"
 
 
+def test_chain3_links_carry_the_pull_through_contact(runs):
+    """chain3: link B is pulled and link A clamped; link C, held by contact alone, carries the
+    whole pull: the two supports' reactions cancel and each contact pair's force (on its
+    slave: C from A, B from C) equals a support's reaction, at every step of a converged run.
+    With nurbs_fe the links touch at the start, so the pull is carried (not zero: a middle
+    link that slipped out of contact gives a converged state with no force at all); facets at
+    level 0 chord the tubes (h = r: a sag of about 0.6 mm per tube against a pull of 0.5 mm)
+    and may never touch."""
+    chain3 = [r for r in runs if r.case == "chain3" and r.status == "converged"]
+    assert chain3, "no converged chain3 run"
+    for run in chain3:
+        for k in range(run.n_steps):
+            pulled = run.reactions("link_b/cap_a+cap_b")[k]
+            clamped = run.reactions("link_a/cap_a+cap_b")[k]
+            scale = np.abs(pulled).max()
+            if run.surface == "nurbs_fe":
+                assert pulled[1] > 0.0 > clamped[1], (run.folder, k, pulled, clamped)
+            elif scale < 1.0:                      # 1 N: no contact
+                continue
+            assert np.abs(pulled + clamped).max() <= CHAIN2_BALANCE * scale, (run.folder, k)
+            for pair in ("link_c/link_a", "link_b/link_c"):
+                force = run.contact_force(k, pair)
+                assert np.abs(force - clamped).max() <= CHAIN2_BALANCE * scale, (run.folder, k, pair)
+
+
 def _planar(runs, surfaces=None) -> list[Run]:
     planar = [r for r in runs if r.case == "planar" and not r.failed
               and (surfaces is None or r.surface in surfaces)]

@@ -49,10 +49,12 @@ class NewtonResult:
 def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0: np.ndarray,
            solve: Callable[[object, np.ndarray], np.ndarray], *, tol: float, reference: float,
            max_iter: int, log: Callable[[int, float], None] | None = None,
-           fixed_tangent: bool = False) -> NewtonResult:
+           fixed_tangent: bool = False, limit: Callable[[np.ndarray], float] | None = None
+           ) -> NewtonResult:
     """Solve ``r(u) = 0`` from ``u0`` until ``|r| <= tol * max(reference, |r(u0)|)``. With
     ``fixed_tangent`` no tangent is assembled (``solve`` gets None and must use a
-    factorization it kept: modified Newton)."""
+    factorization it kept: modified Newton). ``limit(du)``: a factor in (0, 1] the Newton
+    step is scaled by before the line search (a trust region on some unknowns)."""
     u = u0.copy()
     need = not fixed_tangent
     r, K = assemble(u, need)
@@ -73,6 +75,8 @@ def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0
         except RuntimeError as err:   # LinearSolverError: singular, no convergence, NaN
             result.reason = f"linear_solver: {err}"
             return result
+        if limit is not None:
+            du = du * limit(du)
         trial = None
         # monotone first; only if no step decreases the residual, against the largest of
         # the last NONMONOTONE residuals

@@ -138,6 +138,21 @@ class System:
                 K = K + self._floating_shift(K)
         return r, K
 
+    def step_limit(self, du: np.ndarray) -> float:
+        """Factor (0, 1] that keeps every nodal move of a body held by contact alone within
+        ``FLOATING_STEP`` of its element size in one Newton step. Such a body's soft rigid
+        motions may take a step far beyond the search's reach (``MAX_GAP_H``), where its
+        contact is no longer seen and any rigid position solves its (unloaded) equations:
+        chain3's middle link slipped out of both links that way, a converged state without
+        contact."""
+        factor = 1.0
+        for i in self.floating or ():
+            move = float(np.abs(du[self.offsets[i]:self.offsets[i + 1]]).max(initial=0.0))
+            allowed = FLOATING_STEP * self.bodies[i].space.h
+            if move > allowed:
+                factor = min(factor, allowed / move)
+        return factor
+
     def free_rigid_modes(self, i: int, K: sp.csr_matrix) -> int:
         """How many rigid motions body ``i``'s own tangent ``K`` (its conditions included, no
         contact) leaves free: eigenvalues of ``P^T K P`` on its orthonormalized rigid modes
@@ -250,6 +265,8 @@ MODIFIED_NEWTON_ITERATIONS = 6
 FLOATING_SHIFT = 1e-8
 #: a rigid motion whose stiffness is below this fraction of the mean diagonal is free
 FREE_MODE = 1e-10
+#: largest nodal move, in element sizes, of a body held by contact alone in one Newton step
+FLOATING_STEP = 0.25
 #: relax the outer loop's fixed point (:class:`Relaxation`); False: plain substitution
 ACCELERATE = True
 
@@ -339,7 +356,7 @@ def _solve_increment(system: System, solver: _Solver, u0: np.ndarray,
             tic = time.perf_counter()
             result = newton(assemble, u, solver, tol=options.newton_tol, reference=reference,
                             max_iter=MODIFIED_NEWTON_ITERATIONS if fixed_tangent else options.max_newton,
-                            fixed_tangent=fixed_tangent,
+                            fixed_tangent=fixed_tangent, limit=system.step_limit,
                             log=lambda k, r: log(f"t={t:.4g} pass {outer} newton {k}: "
                                                  f"|r|/ref={r:.3e}  ({time.perf_counter() - tic:.2f} s)"))
             solver.frozen = False
