@@ -54,3 +54,24 @@ def test_inadmissible_trials_are_halved():
     assert np.allclose(calls[1:4], [3.86, 2.18, 1.34])
     assert np.isfinite(res.residuals).all()
     assert res.converged and abs(res.u[0] - 1.9) < 1e-12
+
+
+def test_nonmonotone_fallback_reuses_the_monotone_trials():
+    """r = x with a tangent of the wrong sign on [-6, 0] (an ascent direction there): from
+    10 a short tangent lands at -5 (|r| 5); from -5 every step fraction raises |r|, so the
+    monotone search fails, and the largest fraction below the largest recent residual (10) is
+    taken, the half step to -7.5; the tangent is right again there and the root follows. The
+    fallback takes that step from the monotone pass's own trials: the start, the first full
+    step, 7 trials, the tangent at the accepted half step and the last full step (evaluating
+    the fallback's steps again would add 2)."""
+    calls = []
+
+    def assemble(u, tangent):
+        x = u[0]
+        calls.append(x)
+        slope = 2.0 / 3.0 if x > 0.0 else (-1.0 if x >= -6.0 else 1.0)
+        return np.array([x]), (np.array([[slope]]) if tangent else None)
+    res = newton(assemble, np.array([10.0]), _solve, tol=1e-14, reference=1.0, max_iter=10)
+    assert res.converged and res.u[0] == 0.0
+    np.testing.assert_allclose(res.residuals, [10.0, 5.0, 7.5, 0.0])
+    assert len(calls) == 11

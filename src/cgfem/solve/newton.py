@@ -77,26 +77,28 @@ def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0
             return result
         if limit is not None:
             du = du * limit(du)
-        trial = None
-        # monotone first; only if no step decreases the residual, against the largest of
-        # the last NONMONOTONE residuals
-        for bound in dict.fromkeys((norm, max(result.residuals[-NONMONOTONE:]))):
-            step = 1.0
-            while step >= MIN_STEP:
-                candidate = u + step * du
-                # the full step usually succeeds: assemble its tangent at once
-                r_new, K_new = assemble(candidate, need and step == 1.0)
-                n_new = float(np.linalg.norm(r_new))
-                if np.isfinite(n_new) and n_new ** 2 <= (1.0 - 2.0 * ARMIJO * step) * bound ** 2:
-                    trial = candidate
-                    break
-                step *= 0.5
-            if trial is not None:
+        # monotone first; if no step decreases the residual, the largest step below the
+        # largest of the last NONMONOTONE residuals (from the same trials, not assembled again)
+        bound = max(result.residuals[-NONMONOTONE:])
+        trial = fallback = None
+        step = 1.0
+        while step >= MIN_STEP:
+            candidate = u + step * du
+            # the full step usually succeeds: assemble its tangent at once
+            r_new, K_new = assemble(candidate, need and step == 1.0)
+            n_new = float(np.linalg.norm(r_new))
+            armijo = 1.0 - 2.0 * ARMIJO * step
+            if np.isfinite(n_new) and n_new ** 2 <= armijo * norm ** 2:
+                trial = (candidate, r_new, n_new, K_new)
                 break
+            if fallback is None and np.isfinite(n_new) and n_new ** 2 <= armijo * bound ** 2:
+                fallback = (candidate, r_new, n_new, K_new)
+            step *= 0.5
+        trial = trial or fallback
         if trial is None:
             result.reason = "line_search"
             return result
-        u, r, norm = trial, r_new, n_new
+        u, r, norm, K_new = trial
         if need:
             K = K_new if K_new is not None else assemble(u, True)[1]
         result.u = u
