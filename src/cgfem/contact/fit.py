@@ -36,6 +36,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from cgfem.contact import _fit_kernels as _k
+from cgfem.contact.surfaces import locate_points
 from cgfem.embedding.export import write_vtu_files
 from cgfem.embedding.partition import SurfaceQuadrature
 from cgfem.errors import InputError
@@ -160,9 +161,7 @@ def surface_basis(surface: NurbsSurface, uv: np.ndarray) -> SurfaceBasis:
 def fe_shape_matrix(space: Space, x: np.ndarray) -> sp.csr_matrix:
     """(n, n_nodes) H8 shape functions of ``space`` at points ``x`` (n, 3) (located in their
     active elements); a point in no active element is a ValueError."""
-    slots, xi = space.locate(np.asarray(x, float))
-    if np.any(slots < 0):
-        raise ValueError(f"{int(np.sum(slots < 0))} surface points outside the active elements")
+    slots, xi = locate_points(space, x)
     N = shape_functions(xi, space.h)[0]
     n = slots.size
     return sp.csr_matrix((N.ravel(), space.connectivity[slots].ravel(), np.arange(0, 8 * n + 1, 8)),

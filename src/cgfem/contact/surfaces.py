@@ -69,7 +69,7 @@ def element_values(space: Space, u: np.ndarray, slots: np.ndarray) -> np.ndarray
     return u.reshape(-1, 3)[space.connectivity[slots]]
 
 
-def _locate(space: Space, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def locate_points(space: Space, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Active element (n,) and local coordinates (n, 3) of surface points ``x`` (n, 3);
     every point of the boundary lies in a cut element, so none may be missing."""
     slots, xi = space.locate(np.ascontiguousarray(x, dtype=float))
@@ -150,7 +150,7 @@ class NurbsFeSurface:
         keep = np.isin(surface.patch, self.patches)
         self.seed_piece = surface.patch[keep]
         self.seed_theta = surface.uv[keep]
-        self._seed_slot, self._seed_xi = _locate(space, surface.x[keep])
+        self._seed_slot, self._seed_xi = locate_points(space, surface.x[keep])
         self.h = space.h
         seeds = surface.x[keep]
         #: the largest distance from a seed to its nearest neighbour (about the distance from
@@ -174,7 +174,7 @@ class NurbsFeSurface:
             rows = rule.patch == pid
             d = self.solid.patches[pid].surface.derivatives(rule.uv[rows], 1)
             A[rows], B[rows] = d[:, 1, 0], d[:, 0, 1]
-        slots, xi = _locate(self.space, rule.x)
+        slots, xi = locate_points(self.space, rule.x)
         N, dN, _ = shape_derivatives(xi, self.h)
         ca = np.einsum("paj,pj->pa", dN, A)
         cb = np.einsum("paj,pj->pa", dN, B)
@@ -198,7 +198,7 @@ class NurbsFeSurface:
             Q[rows, :order + 1, :order + 1] = srf.derivatives(uv, order)
         X, Qt = Q[:, 0, 0], np.stack([Q[:, 1, 0], Q[:, 0, 1]], axis=1)
         if slot is None or np.any(np.asarray(slot) < 0):
-            slots, xi = _locate(self.space, X)
+            slots, xi = locate_points(self.space, X)
         else:
             slots = np.asarray(slot, np.int64)
             xi = (X - self._centres[slots]) / (0.5 * self.h)
@@ -308,8 +308,7 @@ class NurbsFeSurface:
         the seeds' spacing of the ray: the segment is sampled at that spacing, the seeds
         nearest to the samples are sorted by their distance to the ray, and those within
         twice the spacing start Newton (none: no hit possible). Further seeds matter: a
-        patch may close on itself (a seam), where Newton from one side stops at the domain's
-        edge while the hit lies just across."""
+        start on the wrong side of a fold or a patch edge may not converge to the hit."""
         n = x1.shape[0]
         seeds_x = self._seed_positions(u)
         m = int(np.ceil(2.0 * max_gap / self.spacing)) + 1
