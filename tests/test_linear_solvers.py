@@ -212,6 +212,29 @@ def test_choose_backend(monkeypatch) -> None:
     assert choose_backend(big, False) == "superlu"
     with pytest.raises(ValueError, match="'pardiso' is not available"):
         choose_backend(1000, True, "pardiso")
+    # saddle points never go to pyamg
+    assert choose_backend(big, True, indefinite=True) == "superlu"
+    with pytest.raises(ValueError, match="saddle-point"):
+        choose_backend(1000, True, "pyamg", indefinite=True)
+    monkeypatch.setattr(linear, "available_backends", lambda: BACKENDS)
+    assert choose_backend(big, True, indefinite=True) == "pardiso"
+
+
+@pytest.mark.parametrize("backend", DIRECT)
+def test_saddle_point(backend: str, cube) -> None:
+    """[[K, C^T], [C, 0]]: symmetric indefinite with a zero diagonal block (the fit
+    constraints of nurbs_fit); pardiso stores that block's diagonal as explicit zeros."""
+    K, f, *_ = cube
+    rng = np.random.default_rng(3)
+    C = sp.random(30, K.shape[0], density=0.05, random_state=rng, format="csr") + sp.eye(30, K.shape[0])
+    A = sp.bmat([[K, C.T], [C, None]], format="csr")
+    b = np.concatenate([f, rng.standard_normal(30)])
+    solver = factorize(A, backend=backend, symmetric=True, indefinite=True)
+    x = solver.solve(b)
+    assert np.linalg.norm(A @ x - b) <= 1e-12 * np.linalg.norm(b)
+    assert rel(x, np.linalg.solve(A.toarray(), b)) < 1e-8
+    if backend == "pardiso":
+        assert solver.info["mtype"] == -2
 
 
 def test_bad_backend_name(cube) -> None:

@@ -25,6 +25,11 @@ class ContactSet:
         return bool(self.pairs)
 
     @property
+    def n_extra(self) -> int:
+        """Unknowns the contact set owns beyond the bodies' dofs (none yet)."""
+        return 0
+
+    @property
     def symmetric(self) -> bool:
         """Small strain gives symmetric contact tangents, finite strain does not."""
         return not any(p.finite for p in self.pairs)

@@ -30,7 +30,8 @@ Symmetric systems go to pardiso up to :data:`PARDISO_MAX_DOFS` (at most 2x pyamg
 solve, ahead from its second solve, insensitive to conditioning; at 173k it needs 5 solves per
 factorization to break even, at 286k 9) and to pyamg above; without pypardiso, to superlu
 up to :data:`SUPERLU_MAX_DOFS` (under 1 s), then pyamg. Non-symmetric systems go to pardiso,
-else superlu (pyamg only on request). Peak memory at 286k: pardiso 4.1 GB, pyamg 0.9 GB.
+else superlu (pyamg only on request); so do saddle-point systems (``indefinite``: the fit
+constraints of ``nurbs_fit``), which pyamg cannot solve at all. Peak memory at 286k: pardiso 4.1 GB, pyamg 0.9 GB.
 """
 
 from __future__ import annotations
@@ -68,8 +69,11 @@ def available_backends() -> tuple[str, ...]:
     return BACKENDS
 
 
-def choose_backend(n_dofs: int, symmetric: bool, requested: str = "auto") -> str:
-    """The backend for a system of ``n_dofs`` unknowns (see the module docstring)."""
+def choose_backend(n_dofs: int, symmetric: bool, requested: str = "auto",
+                   indefinite: bool = False) -> str:
+    """The backend for a system of ``n_dofs`` unknowns (see the module docstring).
+    ``indefinite``: a saddle-point system (zero diagonal block), which pyamg cannot solve:
+    pardiso, else superlu."""
     if requested != "auto" and requested not in BACKENDS:
         raise ValueError(f"unknown linear solver backend {requested!r}; "
                          f"choose one of {', '.join(BACKENDS)} or 'auto'")
@@ -78,8 +82,11 @@ def choose_backend(n_dofs: int, symmetric: bool, requested: str = "auto") -> str
         if requested not in have:
             raise ValueError(f"linear solver backend {requested!r} is not available "
                              "(pypardiso does not import)")
+        if indefinite and requested == "pyamg":
+            raise ValueError("linear solver backend 'pyamg' cannot solve the saddle-point system of "
+                             "the nurbs_fit surface definition; choose pardiso, superlu or auto")
         return requested
-    if not symmetric:
+    if not symmetric or indefinite:
         return "pardiso" if "pardiso" in have else "superlu"
     if "pardiso" in have:
         return "pardiso" if n_dofs <= PARDISO_MAX_DOFS else "pyamg"
@@ -196,12 +203,16 @@ class _Pardiso(_DirectSolver):
         if np.any(np.diff(A.indptr) == 0):
             raise LinearSolverError("pardiso: the matrix has empty rows (singular matrix)")
         mtype, M = 11, A
-        if symmetric:  # type -2 reads the upper triangle, which must store every diagonal
-            U = sp.triu(A, format="csr")
+        if symmetric:  # type -2 (symmetric indefinite) reads the upper triangle, which must
+            # store every diagonal entry: missing ones (a saddle point's zero block) are stored
+            # as explicit zeros
+            U = sp.triu(A, format="coo")
+            i = np.arange(self.n)
+            U = sp.coo_matrix((np.concatenate([U.data, np.zeros(self.n)]),
+                               (np.concatenate([U.row, i]), np.concatenate([U.col, i]))),
+                              shape=A.shape).tocsr()          # sums duplicates, keeps zeros
             U.sort_indices()
-            starts = U.indptr[:-1]
-            if np.all(np.diff(U.indptr) > 0) and np.all(U.indices[starts] == np.arange(self.n)):
-                mtype, M = -2, U
+            mtype, M = -2, U
         self._M, self._matvec = M, A.dot  # the check uses all of A, not just its upper half
         if "PYPARDISO_MKL_RT" in os.environ:
             self._solver = PyPardisoSolver(mtype=mtype)
@@ -283,15 +294,16 @@ class _AMG(LinearSolver):
 
 
 def factorize(A: sp.spmatrix, *, backend: str = "auto", symmetric: bool = True,
-              near_null: np.ndarray | None = None, rtol: float = 1e-10) -> LinearSolver:
+              near_null: np.ndarray | None = None, rtol: float = 1e-10,
+              indefinite: bool = False) -> LinearSolver:
     """Factorize (superlu, pardiso) or build the AMG hierarchy (pyamg) of the square matrix
     ``A``. ``near_null`` (e.g. :func:`rigid_body_modes`) and ``rtol`` (relative residual)
-    serve pyamg only. Raises :class:`LinearSolverError` on a singular or non-finite matrix,
+    serve pyamg only; ``indefinite``: a saddle-point matrix (:func:`choose_backend`). Raises :class:`LinearSolverError` on a singular or non-finite matrix,
     ``ValueError`` on a bad backend name or shape."""
     if not sp.issparse(A) or A.ndim != 2 or A.shape[0] != A.shape[1]:
         raise ValueError(f"A must be a square sparse matrix, got {type(A).__name__} "
                          f"of shape {getattr(A, 'shape', None)}")
-    name = choose_backend(A.shape[0], symmetric, backend)
+    name = choose_backend(A.shape[0], symmetric, backend, indefinite)
     t0 = time.perf_counter()
     A = sp.csr_matrix(A, dtype=np.float64, copy=True)  # our own copy, sorted and summed
     A.sum_duplicates()

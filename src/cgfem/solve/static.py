@@ -54,6 +54,9 @@ class StepRecord:
     frozen_stress: list[np.ndarray | None] = field(repr=False)
     recovered: list[np.ndarray] = field(repr=False)
     seconds: float = 0.0
+    #: the system's whole vector of unknowns: the bodies' ``u`` followed by the contact
+    #: set's own unknowns (the fitted surfaces of ``nurbs_fit``, :attr:`System.n_dofs`)
+    unknowns: np.ndarray | None = field(default=None, repr=False)
 
 
 @dataclass
@@ -80,7 +83,9 @@ class Increment:
 
 
 class System:
-    """The bodies of a case stacked into one vector of unknowns (block-diagonal tangent)."""
+    """The bodies of a case stacked into one vector of unknowns (block-diagonal tangent),
+    followed by the unknowns the contact set owns (``contact.n_extra``: the fitted surfaces
+    and their constraint multipliers of ``nurbs_fit``, :mod:`cgfem.contact.fitted`)."""
 
     def __init__(self, bodies: list[BodyModel], pairs: list | None = None):
         """``pairs``: contact pairs (:class:`~cgfem.contact.pair.ContactPair`) between the
@@ -107,8 +112,14 @@ class System:
         return self.contact.symmetric
 
     @property
+    def indefinite(self) -> bool:
+        """A saddle-point tangent (the fit constraints of ``nurbs_fit``)."""
+        return self.contact.n_extra > 0
+
+    @property
     def n_dofs(self) -> int:
-        return int(self.offsets[-1])
+        """All unknowns: the bodies' dofs and the contact set's own."""
+        return int(self.offsets[-1]) + self.contact.n_extra
 
     def split(self, u: np.ndarray) -> list[np.ndarray]:
         return [u[a:b] for a, b in zip(self.offsets[:-1], self.offsets[1:])]
@@ -121,13 +132,15 @@ class System:
         it)."""
         parts = [b.assemble(ub, t, s, tangent and not (self.linear and self._K is not None))
                  for b, ub, s in zip(self.bodies, self.split(u), frozen_stress)]
-        r = np.concatenate([p[0] for p in parts])
+        r = np.concatenate([p[0] for p in parts] + [np.zeros(self.contact.n_extra)])
         Kc = self.contact.add(u, r, tangent) if self.contact else None
         if not tangent:
             return r, None
         if self.linear and self._K is not None:
             return r, self._K
-        K = sp.block_diag([p[1] for p in parts], format="csr")
+        extra = self.contact.n_extra
+        K = sp.block_diag([p[1] for p in parts] + ([sp.csr_matrix((extra, extra))] if extra else []),
+                          format="csr")
         if self.linear:
             self._K = K
         if Kc is not None:
@@ -197,9 +210,11 @@ class System:
         return float(np.sqrt(total))
 
     def near_null(self) -> np.ndarray:
-        """Rigid-body modes of every body, block by block (n_dofs, 6 n_bodies)."""
+        """Rigid-body modes of every body, block by block (n_dofs, 6 n_bodies); zero on the
+        contact set's own unknowns."""
         blocks = [rigid_body_modes(b.space.coordinates) for b in self.bodies]
-        return sp.block_diag(blocks).toarray()
+        modes = sp.block_diag(blocks).toarray()
+        return np.vstack([modes, np.zeros((self.contact.n_extra, modes.shape[1]))])
 
 
 class _Solver:
@@ -207,15 +222,16 @@ class _Solver:
     while ``frozen`` (modified Newton: the last factorization serves for a new matrix).
     Failures raise :class:`~cgfem.solve.linear.LinearSolverError`, which Newton reports."""
 
-    def __init__(self, backend: str, near_null: np.ndarray, symmetric: bool = True):
+    def __init__(self, backend: str, near_null: np.ndarray, symmetric: bool = True, indefinite: bool = False):
         self.backend, self.near_null, self.symmetric = backend, near_null, symmetric
+        self.indefinite = indefinite
         self._key, self._factor = None, None
         self.frozen = False
 
     def __call__(self, K: sp.csr_matrix, b: np.ndarray) -> np.ndarray:
         if self._key is not K and not (self.frozen and self._factor is not None):
             self._factor = factorize(K, backend=self.backend, symmetric=self.symmetric,
-                                     near_null=self.near_null)
+                                     near_null=self.near_null, indefinite=self.indefinite)
             self._key = K
         return self._factor.solve(b)
 
@@ -280,8 +296,9 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
     whose outer loop stops at ``options.outer_passes`` above ``options.outer_tol`` is kept,
     logged with a ``warning:`` line and makes the status :data:`OUTER_NOT_CONVERGED`."""
     log = log or (lambda message: None)
-    choose_backend(system.n_dofs, system.symmetric, options.linear)   # ValueError if unusable
-    solver = _Solver(options.linear, system.near_null(), system.symmetric)
+    # ValueError if unusable
+    choose_backend(system.n_dofs, system.symmetric, options.linear, system.indefinite)
+    solver = _Solver(options.linear, system.near_null(), system.symmetric, system.indefinite)
     u = np.zeros(system.n_dofs)
     recovered: list[np.ndarray | None] = [None] * len(system.bodies)
     t, records = 0.0, []
@@ -308,7 +325,7 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
             record = StepRecord(t, outcome.newton_residuals, len(outcome.outer_changes),
                                 outcome.outer_changes, outcome.outer_converged,
                                 system.split(u.copy()), outcome.frozen_stress, recovered,
-                                time.perf_counter() - start)
+                                time.perf_counter() - start, u.copy())
             records.append(record)
             if on_step:
                 on_step(record)
