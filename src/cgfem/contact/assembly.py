@@ -50,7 +50,8 @@ class ContactSet:
     def freeze(self, u: np.ndarray, recovered: list[np.ndarray | None]) -> None:
         """Freeze every pair's ``p_N`` from the slaves' recovered stress at ``u``."""
         for p in self.pairs:
-            p.freeze(self._split(u, p)[0], recovered[p.slave])
+            us = self._split(u, p)[0]
+            p.freeze(us, us, recovered[p.slave])
 
     def frozen(self) -> list[np.ndarray]:
         return [p.state.p_N.copy() for p in self.pairs]

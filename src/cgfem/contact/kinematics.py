@@ -2,20 +2,22 @@
 
 Every surface definition is reduced here to one local form, per slave point ``p``:
 
-- the **slave point** moves with the 24 dofs ``U1`` of its element (8 nodes x 3, node-major):
-  ``x1 = X1 + U1^T phi1`` and its two tangent vectors ``a = A + U1^T ca``,
+- the **slave point** moves with the ``3 A`` dofs ``U1`` of its ``A`` nodes (node-major; the
+  8 nodes of its grid element for NURBS+FE and facets, the control points of the fitted
+  surface's span for ``nurbs_fit``): ``x1 = X1 + U1^T phi1`` and its two tangent vectors ``a = A + U1^T ca``,
   ``b = B + U1^T cb`` (``A x B`` points out of the slave body). The current normal is
   ``n = m / |m|`` with ``m = a x b`` (eq. 3). For NURBS+FE ``A, B = Q_xi, Q_eta``,
   ``phi1 = N(zeta)``, ``ca = grad N . Q_xi`` (eq. 16); for facets ``A, B`` are two edges of the
   triangle and ``phi1, ca, cb`` mix the shape values at its vertices (eq. 11 on the
-  displaced triangle).
-- the **master point** at convective coordinates ``theta = (xi, eta)`` moves with the 24
-  dofs ``U2`` of the master element holding it: ``x2(theta) = Q(theta) + U2^T phi2(theta)``
-  with tangents ``t_alpha = x2_{,alpha}``, second derivatives ``s_{alpha beta}`` and
-  ``d t_alpha / d U2 = psi_alpha`` (eqs. 16-17).
+  displaced triangle); for ``nurbs_fit`` ``phi1, ca, cb`` are the fitting basis and its
+  derivatives (eq. 21).
+- the **master point** at convective coordinates ``theta = (xi, eta)`` moves with the ``3 B``
+  dofs ``U2`` of its ``B`` nodes (the master element holding it, or the fitted span):
+  ``x2(theta) = Q(theta) + U2^T phi2(theta)`` with tangents ``t_alpha = x2_{,alpha}``, second
+  derivatives ``s_{alpha beta}`` and ``d t_alpha / d U2 = psi_alpha`` (eqs. 16-17, 22).
 
 The ray-tracing pairing ``x2(theta) = x1 + g n`` (eq. 2) defines ``theta`` and the gap
-``g`` implicitly as functions of the 48 local dofs ``v = (U1, U2)``. With
+``g`` implicitly as functions of the ``3 (A + B)`` local dofs ``v = (U1, U2)``. With
 ``F(theta, g; v) = x2(theta) - x1 - g n`` and ``J = [t_xi, t_eta, -n]`` the implicit
 function theorem gives ``(theta, g)_{,v} = -J^{-1} F_{,v}`` (the system of eqs. 5 and 9,
 solved in one piece), and differentiating once more (eqs. 28-30)
@@ -43,13 +45,18 @@ _CROSS = np.cross(_E[:, None, :], _E[None, :, :])
 class SlaveFrames:
     """Reference data of slave points (n of them).
 
-    slot : (n,) active element of the slave space holding each point
+    slot : (n,) active element of the slave's FE space holding each point (where its recovered
+        stress and deformation gradient are read)
+    nodes : (n, A) the nodes the point moves with, indices into the slave surface's vector of
+        unknowns viewed as (n_nodes, 3) (the element's nodes; the fitted span's controls,
+        padded with zero coefficients)
     X : (n, 3) reference positions; A, B : (n, 3) reference tangents, ``A x B`` outward
-    phi, ca, cb : (n, 8) coefficients of ``x1``, ``a`` and ``b`` on the element's nodal values
+    phi, ca, cb : (n, A) coefficients of ``x1``, ``a`` and ``b`` on the nodal values
     w : (n,) reference area weights
     """
 
     slot: np.ndarray
+    nodes: np.ndarray
     X: np.ndarray
     A: np.ndarray
     B: np.ndarray
@@ -64,7 +71,7 @@ class SlaveFrames:
 
     def select(self, rows: np.ndarray) -> "SlaveFrames":
         return SlaveFrames(*(getattr(self, f)[rows] for f in
-                             ("slot", "X", "A", "B", "phi", "ca", "cb", "w")))
+                             ("slot", "nodes", "X", "A", "B", "phi", "ca", "cb", "w")))
 
 
 @dataclass(frozen=True)
@@ -81,7 +88,7 @@ class SlaveState:
 
 
 def slave_state(frames: SlaveFrames, U1: np.ndarray) -> SlaveState:
-    """Current slave geometry from the element displacements ``U1`` (n, 8, 3)."""
+    """Current slave geometry from the nodal displacements ``U1`` (n, A, 3)."""
     x = frames.X + np.einsum("pa,pak->pk", frames.phi, U1)
     a = frames.A + np.einsum("pa,pak->pk", frames.ca, U1)
     b = frames.B + np.einsum("pa,pak->pk", frames.cb, U1)
@@ -95,8 +102,9 @@ class MasterPoints:
     """The master surface at the paired points (n of them), current configuration.
 
     x : (n, 3) position; t : (n, 2, 3) tangents ``x_{,xi}``, ``x_{,eta}``;
-    s : (n, 2, 2, 3) second derivatives; phi : (n, 8) ``dx/dU2``; psi : (n, 2, 8)
-    ``dt_alpha/dU2``; slot : (n,) master element; normal : (n, 3) outward unit normal
+    s : (n, 2, 2, 3) second derivatives; phi : (n, B) ``dx/dU2``; psi : (n, 2, B)
+    ``dt_alpha/dU2``; slot : (n,) master element (-1 for a fitted surface); normal : (n, 3)
+    outward unit normal; nodes : (n, B) the nodes of ``U2`` (as :attr:`SlaveFrames.nodes`)
     """
 
     x: np.ndarray
@@ -106,12 +114,14 @@ class MasterPoints:
     psi: np.ndarray
     slot: np.ndarray
     normal: np.ndarray
+    nodes: np.ndarray
 
 
 @dataclass(frozen=True)
 class GapDerivatives:
-    """``g`` (n,), ``g_{,v}`` (n, 48) and ``g_{,vv}`` (n, 48, 48) on ``v = (U1, U2)``, and
-    the current area weight ``w`` (n,) with its derivative ``w_{,v}`` (n, 48)."""
+    """``g`` (n,), ``g_{,v}`` (n, D) and ``g_{,vv}`` (n, D, D) on ``v = (U1, U2)``
+    (``D = 3 (A + B)``), and the current area weight ``w`` (n,) with its derivative
+    ``w_{,v}`` (n, D)."""
 
     g: np.ndarray
     dg: np.ndarray
@@ -142,45 +152,47 @@ def gap_derivatives(frames: SlaveFrames, slave: SlaveState, master: MasterPoints
     ``current_area``: the weight is the current area ``w0 |a x b| / |A x B|`` (finite
     strain) instead of the reference one."""
     n_pts = g.size
+    s1, s2 = 3 * frames.phi.shape[1], 3 * master.phi.shape[1]    # slave and master dofs per point
+    d = s1 + s2
     n, m, r = slave.n, slave.m, slave.norm_m
-    # dm/dU1[a, k] = ca_a (e_k x b) + cb_a (a x e_k)       (n, 8, 3, 3): [p, node, k, vector]
+    # dm/dU1[a, k] = ca_a (e_k x b) + cb_a (a x e_k)       (n, A, 3, 3): [p, node, k, vector]
     ek_x_b = np.cross(_E[None, :, :], slave.b[:, None, :])          # (n, 3, 3)
     a_x_ek = np.cross(slave.a[:, None, :], _E[None, :, :])
     dm = (frames.ca[:, :, None, None] * ek_x_b[:, None] + frames.cb[:, :, None, None] * a_x_ek[:, None])
-    dm = dm.reshape(n_pts, 24, 3)
+    dm = dm.reshape(n_pts, s1, 3)
     m_dm = np.einsum("pk,pik->pi", m, dm)                           # m . m_i
     dn = dm / r[:, None, None] - m[:, None, :] * (m_dm / r[:, None] ** 3)[:, :, None]
-    # F_v (3, 48): dF/dU1 = -phi1 e_k - g n_i ; dF/dU2 = phi2 e_k
-    Fv = np.zeros((n_pts, 3, 48))
-    Fv[:, :, :24] = -np.einsum("pa,kc->pcak", frames.phi, _E).reshape(n_pts, 3, 24) \
+    # F_v (3, D): dF/dU1 = -phi1 e_k - g n_i ; dF/dU2 = phi2 e_k
+    Fv = np.zeros((n_pts, 3, d))
+    Fv[:, :, :s1] = -np.einsum("pa,kc->pcak", frames.phi, _E).reshape(n_pts, 3, s1) \
         - g[:, None, None] * dn.transpose(0, 2, 1)
-    Fv[:, :, 24:] = np.einsum("pa,kc->pcak", master.phi, _E).reshape(n_pts, 3, 24)
+    Fv[:, :, s1:] = np.einsum("pa,kc->pcak", master.phi, _E).reshape(n_pts, 3, s2)
     J = np.stack([master.t[:, 0], master.t[:, 1], -n], axis=2)     # columns
-    theta = -np.linalg.solve(J, Fv)                                 # (n, 3, 48)
+    theta = -np.linalg.solve(J, Fv)                                 # (n, 3, D)
     q = gap_gradient_direction(master.t, n)
     dg = theta[:, 2]
     w = area_weight(frames, r, current_area)
-    dw = np.zeros((n_pts, 48))
+    dw = np.zeros((n_pts, d))
     if current_area:     # w = w0 |m| / R: dw = (w / |m|) n . dm
-        dw[:, :24] = (w / r)[:, None] * np.einsum("pk,pik->pi", n, dm)
+        dw[:, :s1] = (w / r)[:, None] * np.einsum("pk,pik->pi", n, dm)
     if not second:
         return GapDerivatives(g, dg, np.zeros((n_pts, 0, 0)), w, dw)
-    th = theta[:, :2]                                               # (n, 2, 48)
+    th = theta[:, :2]                                               # (n, 2, D)
     qs = np.einsum("pk,pabk->pab", q, master.s)
     d2g = np.einsum("pab,pai,pbj->pij", qs, th, th)
     # q . dt_alpha/dv_j: only on U2 dofs, psi_alpha[a] q_k
-    qt = np.zeros((n_pts, 2, 48))
-    qt[:, :, 24:] = np.einsum("pca,pk->pcak", master.psi, q).reshape(n_pts, 2, 24)
+    qt = np.zeros((n_pts, 2, d))
+    qt[:, :, s1:] = np.einsum("pca,pk->pcak", master.psi, q).reshape(n_pts, 2, s2)
     cross = np.einsum("pai,paj->pij", th, qt)
     d2g += cross + cross.transpose(0, 2, 1)
-    qdn = np.zeros((n_pts, 48))
-    qdn[:, :24] = np.einsum("pk,pik->pi", q, dn)
+    qdn = np.zeros((n_pts, d))
+    qdn[:, :s1] = np.einsum("pk,pik->pi", q, dn)
     outer = dg[:, :, None] * qdn[:, None, :]
     d2g -= outer + outer.transpose(0, 2, 1)
     # - g q . n_ij on the slave block (second derivative of the normal)
     c = frames.ca[:, :, None] * frames.cb[:, None, :]
-    c = c - c.transpose(0, 2, 1)                                    # (n, 8, 8)
-    d2m = np.einsum("pac,klv->pakclv", c, _CROSS).reshape(n_pts, 24, 24, 3)
+    c = c - c.transpose(0, 2, 1)                                    # (n, A, A)
+    d2m = np.einsum("pac,klv->pakclv", c, _CROSS).reshape(n_pts, s1, s1, 3)
     qm = np.einsum("pk,pk->p", q, m)
     q_dm = np.einsum("pk,pik->pi", q, dm)
     r3 = r ** 3
@@ -189,5 +201,5 @@ def gap_derivatives(frames: SlaveFrames, slave: SlaveState, master: MasterPoints
            - qm[:, None, None] * (np.einsum("pik,pjk->pij", dm, dm)
                                   + np.einsum("pk,pijk->pij", m, d2m)) / r3[:, None, None]
            + 3.0 * (qm / r ** 5)[:, None, None] * m_dm[:, :, None] * m_dm[:, None, :])
-    d2g[:, :24, :24] -= g[:, None, None] * qn2
+    d2g[:, :s1, :s1] -= g[:, None, None] * qn2
     return GapDerivatives(g, dg, -d2g, w, dw)

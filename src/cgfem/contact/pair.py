@@ -42,10 +42,10 @@ import scipy.sparse as sp
 
 from cgfem.contact.kinematics import (SlaveFrames, area_weight, gap_derivatives, gap_gradient_direction,
                                       slave_state)
-from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface, RayHits, element_values, shape_derivatives
+from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface, RayHits, shape_derivatives
 
-#: slave points whose (48, 48) tangents are formed at once (memory: about 0.3 GB per chunk
-#: with the temporaries of the second derivatives)
+#: slave points whose (D, D) tangents (D = 48 for NURBS+FE and facets) are formed at once
+#: (memory: about 0.3 GB per chunk with the temporaries of the second derivatives at D = 48)
 CHUNK_POINTS = 2048
 #: switches of one point's active status in one Newton solve before its status is held
 MAX_SWITCHES = 10
@@ -106,6 +106,14 @@ class ContactPair:
 
     slave, master : index of the bodies in the system
     frames : slave point data; grad_N (n, 8, 3) shape gradients at the slave points
+    slave_surface : the slave side's surface when its points move with unknowns other than
+        the slave body's dofs (``nurbs_fit``: a :class:`~cgfem.contact.fitted.FittedSurface`);
+        None: they move with the body's FE field
+
+    The kinematic vectors ``u_s``, ``u_m`` of :meth:`assemble` and :meth:`points` are the
+    unknowns the slave points and the master surface move with: the bodies' dofs, or the
+    fitted surfaces' control displacements (:class:`~cgfem.contact.assembly.ContactSet`
+    gathers them).
     """
 
     name: str
@@ -119,6 +127,7 @@ class ContactPair:
     eps: float
     finite: bool
     max_gap: float
+    slave_surface: object | None = None
     state: ContactState = field(init=False)
 
     def __post_init__(self) -> None:
@@ -130,7 +139,7 @@ class ContactPair:
 
     # -- kinematics ------------------------------------------------------------------------
     def _slave(self, u_s: np.ndarray):
-        U1 = element_values(self.slave_space, u_s, self.frames.slot)
+        U1 = u_s.reshape(-1, 3)[self.frames.nodes]
         return U1, slave_state(self.frames, U1)
 
     def search(self, u_s: np.ndarray, u_m: np.ndarray) -> tuple:
@@ -139,18 +148,26 @@ class ContactPair:
         st = self._slave(u_s)[1]
         return st, self.surface.search(u_m, st.x, st.n, self.max_gap, self.state.hits)
 
-    def freeze(self, u_s: np.ndarray, recovered: np.ndarray | None) -> None:
+    def freeze(self, u_s: np.ndarray, u_body: np.ndarray, recovered: np.ndarray | None) -> None:
         """Freeze ``p_N = n . sigma* . n`` at the slave points from the slave's recovered
         stress (nodal, (n_nodes, 3, 3): Cauchy in small strain, first Piola-Kirchhoff in
-        finite strain) and the current normal; ``None``: ``p_N = 0`` (first pass)."""
+        finite strain) and the current normal (from the kinematic vector ``u_s``);
+        ``u_body``: the slave body's dofs (its deformation gradient); ``None``: ``p_N = 0``
+        (first pass)."""
         if recovered is None:
             self.state.p_N = np.zeros(self.n_points)
             return
-        U1, st = self._slave(u_s)
-        nodal = recovered[self.slave_space.connectivity[self.frames.slot]]      # (n, 8, 3, 3)
-        stress = np.einsum("pa,paij->pij", self.frames.phi, nodal)
+        st = self._slave(u_s)[1]
+        conn = self.slave_space.connectivity[self.frames.slot]
+        if self.slave_surface is None:      # the points' own FE interpolation
+            N = self.frames.phi
+        else:                               # the FE shape functions at the reference point
+            N = shape_derivatives((self.frames.X - self.slave_space.centres()[self.frames.slot])
+                                  / (0.5 * self.slave_space.h), self.slave_space.h)[0]
+        stress = np.einsum("pa,paij->pij", N, recovered[conn])                  # (n, 3, 3)
         if self.finite:
-            F = np.eye(3) + np.einsum("pak,paj->pkj", U1, self.grad_N)
+            U = u_body.reshape(-1, 3)[conn]
+            F = np.eye(3) + np.einsum("pak,paj->pkj", U, self.grad_N)
             stress = np.einsum("pij,pkj->pik", stress, F) / np.linalg.det(F)[:, None, None]
         self.state.p_N = np.einsum("pi,pij,pj->p", st.n, stress, st.n)
 
@@ -201,18 +218,20 @@ class ContactPair:
         mp = self.surface.evaluate(u_m, hits.piece[rows], hits.theta[rows], slot=_slots(hits, rows))
         d = gap_derivatives(frames, st_r, mp, hits.g[rows], self.finite, second=tangent)
         lam_r = lam[rows]
-        dofs_s = self.slave_space.element_dofs[frames.slot]                       # (k, 24)
-        dofs_m = self.master_space.element_dofs[mp.slot]
-        f = (d.w * lam_r)[:, None] * d.dg                                         # (k, 48)
-        np.add.at(r_s, dofs_s, f[:, :24])
-        np.add.at(r_m, dofs_m, f[:, 24:])
+        dofs_s = node_dofs(frames.nodes)                                          # (k, 3 A)
+        dofs_m = node_dofs(mp.nodes)                                              # (k, 3 B)
+        s1 = dofs_s.shape[1]
+        f = (d.w * lam_r)[:, None] * d.dg                                         # (k, D)
+        np.add.at(r_s, dofs_s, f[:, :s1])
+        np.add.at(r_m, dofs_m, f[:, s1:])
         if not tangent:
             return None
         K = (d.w * self.eps)[:, None, None] * d.dg[:, :, None] * d.dg[:, None, :] \
             + (d.w * lam_r)[:, None, None] * d.d2g + lam_r[:, None, None] * d.dg[:, :, None] * d.dw[:, None, :]
-        dofs = np.concatenate([dofs_s, dofs_m + u_s.size], axis=1)                # (k, 48)
-        rr = np.repeat(dofs, 48, axis=1).ravel()
-        cc = np.tile(dofs, (1, 48)).ravel()
+        dofs = np.concatenate([dofs_s, dofs_m + u_s.size], axis=1)                # (k, D)
+        size = dofs.shape[1]
+        rr = np.repeat(dofs, size, axis=1).ravel()
+        cc = np.tile(dofs, (1, size)).ravel()
         n = u_s.size + u_m.size
         return sp.coo_matrix((K.ravel(), (rr, cc)), shape=(n, n)).tocsr()
 
@@ -249,6 +268,11 @@ class ContactPair:
             force[rows] = -(w[rows] * lam[rows])[:, None] * gap_gradient_direction(t, st.n[rows])
         return ContactPoints(st.x, st.n, np.where(hits.found, hits.g, np.nan), lam, active, w,
                              self.state.p_N.copy(), force)
+
+
+def node_dofs(nodes: np.ndarray) -> np.ndarray:
+    """Dofs (k, 3 A) of nodes (k, A), node-major: ``3 node + component``."""
+    return (3 * nodes[:, :, None] + np.arange(3)).reshape(nodes.shape[0], -1)
 
 
 def _slots(hits: RayHits, rows: np.ndarray) -> np.ndarray | None:

@@ -178,7 +178,7 @@ class NurbsFeSurface:
         N, dN, _ = shape_derivatives(xi, self.h)
         ca = np.einsum("paj,pj->pa", dN, A)
         cb = np.einsum("paj,pj->pa", dN, B)
-        return SlaveFrames(slots, rule.x.copy(), A, B, N, ca, cb, rule.w.copy())
+        return SlaveFrames(slots, self.space.connectivity[slots], rule.x.copy(), A, B, N, ca, cb, rule.w.copy())
 
     # -- master side ---------------------------------------------------------------------
     def evaluate(self, u: np.ndarray, piece: np.ndarray, theta: np.ndarray, second: bool = True,
@@ -215,7 +215,7 @@ class NurbsFeSurface:
             s = Qs + np.einsum("pcda,pak->pcdk", coef, U)
         m2 = np.cross(t[:, 0], t[:, 1])
         normal = m2 / np.linalg.norm(m2, axis=1)[:, None]
-        return MasterPoints(x, t, s, N, psi, slots, normal)
+        return MasterPoints(x, t, s, N, psi, slots, normal, self.space.connectivity[np.maximum(slots, 0)])
 
     def search(self, u: np.ndarray, x1: np.ndarray, n1: np.ndarray, max_gap: float,
                previous: RayHits | None = None) -> RayHits:
@@ -368,7 +368,8 @@ class FacetSurface:
     def slave_frames(self, tri: np.ndarray, theta: np.ndarray, w: np.ndarray) -> SlaveFrames:
         """Slave data of points with barycentric ``theta`` (n, 2) in triangles ``tri`` (n,)."""
         X, A, B, phi, ca, cb = self._coefficients(tri, theta)
-        return SlaveFrames(self.slot[tri], X, A, B, phi, ca, cb, np.asarray(w, float).copy())
+        return SlaveFrames(self.slot[tri], self.space.connectivity[self.slot[tri]], X, A, B, phi, ca, cb,
+                           np.asarray(w, float).copy())
 
     def evaluate(self, u: np.ndarray, piece: np.ndarray, theta: np.ndarray, second: bool = True,
                  slot: np.ndarray | None = None) -> MasterPoints:
@@ -381,7 +382,8 @@ class FacetSurface:
         t = np.stack([A, B], axis=1) + np.einsum("pca,pak->pck", psi, U)
         m2 = np.cross(t[:, 0], t[:, 1])
         normal = m2 / np.linalg.norm(m2, axis=1)[:, None]
-        return MasterPoints(x, t, np.zeros((piece.size, 2, 2, 3)), phi, psi, self.slot[piece], normal)
+        return MasterPoints(x, t, np.zeros((piece.size, 2, 2, 3)), phi, psi, self.slot[piece], normal,
+                            self.space.connectivity[self.slot[piece]])
 
     def search(self, u: np.ndarray, x1: np.ndarray, n1: np.ndarray, max_gap: float,
                previous: RayHits | None = None) -> RayHits:
