@@ -21,6 +21,7 @@ from cgfem.case.model import SURFACES, Body, Case
 from cgfem.embedding.quadrature import Embedding, embed, grid_for
 from cgfem.contact.assembly import summary as contact_summary
 from cgfem.contact.build import DEFINITIONS as CONTACT_DEFINITIONS, build_pair
+from cgfem.contact.fit import fit_mesh, write_fit_json, write_fit_vtu
 from cgfem.contact.output import write_contact
 from cgfem.errors import InputError
 from cgfem.fem.body import BodyModel, boundary_of
@@ -143,7 +144,8 @@ def build_pairs(case: Case, models: list[BodyModel], solids: dict, surface: str,
     for spec in case.contact:
         tic = time.perf_counter()
         pair = build_pair(f"{spec.slave}/{spec.master}", spec, index, models, solids, surface,
-                          case.kinematics == "finite", case.body(spec.slave).material.E)
+                          case.kinematics == "finite", case.body(spec.slave).material.E,
+                          case.body(spec.master).material.E)
         pairs.append(pair)
         log(f"contact {pair.name}: {pair.n_points} slave points, penalty {pair.eps:.3g} Pa/m "
             f"({time.perf_counter() - tic:.2f} s)")
@@ -255,15 +257,33 @@ def run_case(case: Case, level: int, surface: str, out: Path,
     return RunStatus(result.status, path, result.message)
 
 
+def _write_fits(out: Path, system: System, record: StepRecord, number: int) -> dict:
+    """``nurbs_fit``: the fitted surfaces of step ``number`` as ``fit_NNN.json`` (NURBS, the
+    moved control nets) and ``fit_NNN.vtu`` (sampled, with the FE displacement beside the
+    fitted one); per fitted patch its relative L2 distance to the FE displacement."""
+    fits = system.contact.fits(record.unknowns)
+    patches = [b.fit for b, _ in fits]
+    moves = [V for _, V in fits]
+    write_fit_json(out / f"fit_{number:03d}.json", patches, moves)
+    write_fit_vtu(out / f"fit_{number:03d}.vtu", fit_mesh(patches, moves, [record.u[b.body] for b, _ in fits]))
+    names = [m.name for m in system.bodies]
+    return {f"{names[b.body]}/{b.fit.name}": {"control_points": b.fit.n_ctrl,
+                                               "relative_l2_error": b.fit.relative_l2_error(record.u[b.body], V)}
+            for b, V in fits}
+
+
 def _write_step(out: Path, system: System, record: StepRecord, number: int,
                 log: Callable[[str], None]) -> dict:
     """Write the files of step ``number`` and return its entry of ``summary.json``."""
     models = system.bodies
     contact = {"force": [0.0, 0.0, 0.0], "active_points": 0, "max_pressure": 0.0, "pairs": {}}
     if system.contact:
-        points = system.contact.points(np.concatenate(record.u))
+        unknowns = record.unknowns if record.unknowns is not None else np.concatenate(record.u)
+        points = system.contact.points(unknowns)
         write_contact(out, number, points)
         contact = contact_summary(points, [p.name for p in system.contact.pairs])
+        if system.contact.blocks:
+            contact["fits"] = _write_fits(out, system, record, number)
     outputs = [step_outputs(m, u, s) for m, u, s in zip(models, record.u, record.recovered)]
     write_step(out, number, outputs)
     reactions = {}

@@ -214,10 +214,16 @@ class ContactPair:
     kappa: float = 10.0
     slave_patches: tuple[str, ...] | None = None     # None: every patch of the body
     master_patches: tuple[str, ...] | None = None
+    #: the fitting space of ``nurbs_fit`` (:func:`cgfem.contact.fit.fit_space`): "auto",
+    #: "none" or a number of knots inserted per span
+    fit: str | int = "auto"
 
     def __post_init__(self) -> None:
         if self.slave == self.master:
             raise InputError("master", f"must differ from slave ({self.slave!r})")
+        fit = self.fit
+        if not (fit in ("auto", "none") or (isinstance(fit, int) and not isinstance(fit, bool) and fit >= 0)):
+            raise InputError("fit", f"expected 'auto', 'none' or an integer >= 0, got {fit!r}")
         for name in ("slave_patches", "master_patches"):
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, _patches(getattr(self, name)))

@@ -4,6 +4,12 @@
 off-diagonal blocks (COO triplets on global dofs), freezes ``p_N`` for each pass of the
 outer loop, and reports what the outer loop needs to decide that contact has settled: the
 change of the frozen ``p_N`` and of the active set between passes.
+
+With ``nurbs_fit`` the set also owns unknowns of its own, after the bodies' dofs: per fitted
+patch (one per body and patch, shared by the pairs that use it) its control displacements
+``Z`` and the multipliers ``mu`` of the fit constraint, with the constraint's equations
+(:mod:`cgfem.contact.fitted`). A pair's kinematic vectors are then the ``Z`` of its fitted
+surfaces instead of the bodies' dofs.
 """
 
 from __future__ import annotations
@@ -11,32 +17,61 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from cgfem.contact.fitted import FitBlock, FittedSurface
 from cgfem.contact.pair import ContactPair, ContactPoints
 
 
 class ContactSet:
-    """The contact pairs of a system whose body ``i`` owns dofs ``offsets[i]:offsets[i+1]``."""
+    """The contact pairs of a system whose body ``i`` owns dofs ``offsets[i]:offsets[i+1]``;
+    the set's own unknowns (fitted patches) follow ``offsets[-1]``."""
 
     def __init__(self, pairs: list[ContactPair], offsets: np.ndarray):
         self.pairs = pairs
         self.offsets = np.asarray(offsets, np.int64)
+        self.blocks: list[FitBlock] = []
+        self._block_of: dict[tuple[int, int], FitBlock] = {}
+        self._index = [(self._kinematic_index(p.slave_surface, p.slave),
+                        self._kinematic_index(p.surface, p.master)) for p in pairs]
+        self._constraint: sp.coo_matrix | None = None
 
     def __bool__(self) -> bool:
         return bool(self.pairs)
 
     @property
     def n_extra(self) -> int:
-        """Unknowns the contact set owns beyond the bodies' dofs (none yet)."""
-        return 0
+        """Unknowns the contact set owns beyond the bodies' dofs: ``Z`` and ``mu`` of every
+        fitted patch."""
+        return int(sum(2 * b.z.size for b in self.blocks))
 
     @property
     def symmetric(self) -> bool:
         """Small strain gives symmetric contact tangents, finite strain does not."""
         return not any(p.finite for p in self.pairs)
 
-    def _split(self, u: np.ndarray, pair: ContactPair) -> tuple[np.ndarray, np.ndarray]:
-        o = self.offsets
-        return u[o[pair.slave]:o[pair.slave + 1]], u[o[pair.master]:o[pair.master + 1]]
+    def _kinematic_index(self, surface, body: int) -> np.ndarray:
+        """Global indices of the vector a pair side moves with: the body's dofs, or the ``Z``
+        of its fitted patches (blocks registered on first use)."""
+        if not isinstance(surface, FittedSurface):
+            return np.arange(self.offsets[body], self.offsets[body + 1])
+        parts = []
+        for fit in surface.fits:
+            key = (surface.body, fit.patch)
+            if key not in self._block_of:
+                start = int(self.offsets[-1]) + self.n_extra
+                size = 3 * fit.n_free
+                self._block_of[key] = FitBlock(surface.body, fit, surface.scale, np.arange(start, start + size),
+                                               np.arange(start + size, start + 2 * size))
+                self.blocks.append(self._block_of[key])
+            parts.append(self._block_of[key].z)
+        return np.concatenate(parts)
+
+    def _split(self, u: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """The kinematic vectors of pair ``k``."""
+        s, m = self._index[k]
+        return u[s], u[m]
+
+    def body(self, u: np.ndarray, i: int) -> np.ndarray:
+        return u[self.offsets[i]:self.offsets[i + 1]]
 
     def begin_pass(self) -> None:
         """A new Newton solve: every pair's switch counts reset and held points released."""
@@ -49,9 +84,8 @@ class ContactSet:
 
     def freeze(self, u: np.ndarray, recovered: list[np.ndarray | None]) -> None:
         """Freeze every pair's ``p_N`` from the slaves' recovered stress at ``u``."""
-        for p in self.pairs:
-            us = self._split(u, p)[0]
-            p.freeze(us, us, recovered[p.slave])
+        for k, p in enumerate(self.pairs):
+            p.freeze(self._split(u, k)[0], self.body(u, p.slave), recovered[p.slave])
 
     def frozen(self) -> list[np.ndarray]:
         return [p.state.p_N.copy() for p in self.pairs]
@@ -61,31 +95,66 @@ class ContactSet:
                 for p in self.pairs]
 
     def add(self, u: np.ndarray, r: np.ndarray, tangent: bool, update: bool = True) -> sp.coo_matrix | None:
-        """Add the contact residual to ``r`` (n_dofs,) in place; the tangent (COO, global)."""
+        """Add the contact residual (and the fit constraints' equations) to ``r`` (n,) in
+        place; the tangent (COO on all n unknowns, :attr:`n_extra` included)."""
         rows, cols, vals = [], [], []
-        o = self.offsets
-        for p in self.pairs:
-            us, um = self._split(u, p)
+        for k, p in enumerate(self.pairs):
+            us, um = self._split(u, k)
             # only linearization points (tangent evaluations) move the recorded pairing and
             # active set: line-search trials must not count as active-set switches
             r_s, r_m, trip = p.assemble(us, um, tangent, update and tangent)
-            r[o[p.slave]:o[p.slave + 1]] += r_s
-            r[o[p.master]:o[p.master + 1]] += r_m
+            gs, gm = self._index[k]
+            r[gs] += r_s
+            r[gm] += r_m
             if trip is not None:
                 rr, cc, vv = trip
-                glob = np.concatenate([np.arange(us.size) + o[p.slave], np.arange(um.size) + o[p.master]])
+                glob = np.concatenate([gs, gm])
                 rows.append(glob[rr])
                 cols.append(glob[cc])
                 vals.append(vv)
+        if self.blocks:
+            C = self._constraints()
+            r += C @ u
+            if tangent:
+                rows.append(C.row)
+                cols.append(C.col)
+                vals.append(C.data)
         if not tangent:
             return None
-        n = int(o[-1])
+        n = r.size
         if not rows:
             return sp.coo_matrix((n, n))
         return sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
 
+    def _constraints(self) -> sp.coo_matrix:
+        """The fit constraints' part of the system, linear in the unknowns: per block
+        ``-s G^T mu`` on the body's rows, ``s M mu`` on the ``Z`` rows and ``s (M Z - G u)``
+        on the ``mu`` rows (``G``, ``M`` per displacement component)."""
+        if self._constraint is None:
+            n = int(self.offsets[-1]) + self.n_extra
+            parts = []
+            eye = sp.identity(3, format="csr")
+            for b in self.blocks:
+                G = sp.kron(b.fit.G, eye, format="coo")
+                M = sp.kron(b.fit.M, eye, format="coo")
+                body = int(self.offsets[b.body])
+                for A, cols, sign in ((G, body + G.col, -1.0), (M, b.z[M.col], 1.0)):
+                    # the mu rows, and their transposes on the body's and Z's rows
+                    mu_rows = b.mu[A.row]
+                    parts.append((mu_rows, cols, sign * b.scale * A.data))
+                    parts.append((cols, mu_rows, sign * b.scale * A.data))
+            r = np.concatenate([p[0] for p in parts])
+            c = np.concatenate([p[1] for p in parts])
+            v = np.concatenate([p[2] for p in parts])
+            self._constraint = sp.coo_matrix((v, (r, c)), shape=(n, n))
+        return self._constraint
+
+    def fits(self, u: np.ndarray) -> list[tuple[FitBlock, np.ndarray]]:
+        """Every fitted patch with its control displacements ``V = T Z`` (n_ctrl, 3) at ``u``."""
+        return [(b, b.fit.T @ u[b.z].reshape(-1, 3)) for b in self.blocks]
+
     def points(self, u: np.ndarray) -> list[ContactPoints]:
-        return [p.points(*self._split(u, p)) for p in self.pairs]
+        return [p.points(*self._split(u, k)) for k, p in enumerate(self.pairs)]
 
 
 def active_changes(new: list[np.ndarray], old: list[np.ndarray]) -> int:

@@ -5,6 +5,10 @@ exact NURBS points for ``nurbs_fe``, points on the facet triangles for ``facets`
 pair's ``slave_patches``; the master surface is the master body's ``master_patches`` in the
 same surface definition. ``max_gap`` (the farthest a ray looks) is
 :data:`~cgfem.contact.pair.MAX_GAP_H` times the larger element size of the two bodies.
+
+``nurbs_fit``: both sides are fitted surfaces (:class:`~cgfem.contact.fitted.FittedSurface`)
+of the pair's patches, fitted on each body's exact surface rule in the fitting space the
+pair's ``fit`` option names; the slave points are the same exact points as ``nurbs_fe``'s.
 """
 
 from __future__ import annotations
@@ -12,11 +16,13 @@ from __future__ import annotations
 import numpy as np
 
 from cgfem.case.model import ContactPair as ContactSpec
+from cgfem.contact.fit import build_fits
+from cgfem.contact.fitted import FittedSurface
 from cgfem.contact.pair import MAX_GAP_H, ContactPair, slave_gradients
 from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface
 from cgfem.geometry.solid import Solid
 
-DEFINITIONS = ("facets", "nurbs_fe")
+DEFINITIONS = ("facets", "nurbs_fe", "nurbs_fit")
 
 
 def patch_ids(solid_names: tuple[str, ...], wanted: tuple[str, ...] | None) -> np.ndarray:
@@ -26,9 +32,10 @@ def patch_ids(solid_names: tuple[str, ...], wanted: tuple[str, ...] | None) -> n
 
 
 def build_pair(name: str, spec: ContactSpec, index: dict[str, int], models: list, solids: dict[str, Solid],
-               definition: str, finite: bool, E: float) -> ContactPair:
+               definition: str, finite: bool, E: float, E_master: float | None = None) -> ContactPair:
     """The pair ``spec`` between ``models[index[spec.slave]]`` and the master's model;
-    ``E``: Young's modulus of the slave (Pa), for the penalty ``kappa E / h``."""
+    ``E``: Young's modulus of the slave (Pa), for the penalty ``kappa E / h``; ``E_master``
+    (default ``E``): the master's, which scales its fit constraint (``nurbs_fit``)."""
     if definition not in DEFINITIONS:
         raise NotImplementedError(f"contact with the {definition!r} surface definition")
     s_model, m_model = models[index[spec.slave]], models[index[spec.master]]
@@ -37,9 +44,17 @@ def build_pair(name: str, spec: ContactSpec, index: dict[str, int], models: list
     s_ids = patch_ids(tuple(p.name for p in s_solid.patches), spec.slave_patches)
     m_ids = patch_ids(tuple(p.name for p in m_solid.patches), spec.master_patches)
     rule = s_emb.boundary.select(np.isin(s_emb.boundary.patch, s_ids) & (s_emb.boundary.w > 0.0))
+    slave_surface = None
     if definition == "nurbs_fe":
         frames = NurbsFeSurface(s_solid, s_model.space, rule, s_ids).slave_frames(rule)
         master = NurbsFeSurface(m_solid, m_model.space, m_emb.surface, m_ids)
+    elif definition == "nurbs_fit":
+        E_m = E if E_master is None else E_master
+        slave_surface = FittedSurface(index[spec.slave], build_fits(s_solid, s_emb.surface, s_model.space, s_ids,
+                                                                    spec.fit), s_emb.surface, E / s_model.space.h)
+        frames = slave_surface.slave_frames(rule)
+        master = FittedSurface(index[spec.master], build_fits(m_solid, m_emb.surface, m_model.space, m_ids, spec.fit),
+                               m_emb.surface, E_m / m_model.space.h)
     else:
         s_fac, m_fac = s_emb.facets, m_emb.facets
         slave_srf = FacetSurface(s_model.space, s_fac.triangles, s_fac.element, np.isin(s_fac.patch, s_ids))
@@ -48,4 +63,5 @@ def build_pair(name: str, spec: ContactSpec, index: dict[str, int], models: list
     h = s_model.space.h
     max_gap = MAX_GAP_H * max(h, m_model.space.h)
     return ContactPair(name, index[spec.slave], index[spec.master], s_model.space, m_model.space, frames,
-                       slave_gradients(s_model.space, frames), master, spec.kappa * E / h, finite, max_gap)
+                       slave_gradients(s_model.space, frames), master, spec.kappa * E / h, finite, max_gap,
+                       slave_surface)

@@ -194,30 +194,62 @@ def _tie(surface: NurbsSurface, direction: int, i: int) -> float | None:
     return a if crease <= 1e-12 * float(np.abs(pts).max()) else None
 
 
+def _seam_tie(surface: NurbsSurface, direction: int) -> float | None:
+    """The coefficient ``a`` of the seam of a direction along which the patch closes on itself
+    (its first and last control rows coincide, as a revolved turn's do): the two rows are one
+    point, tied as an interior joint (:func:`_tie`) between row ``n - 2`` (before the seam) and
+    row 1 (after it), ``V_0 = V_{n-1} = a V_{n-2} + (1 - a) V_1``. None if the direction is
+    open, has fewer than 4 rows, or the condition does not hold for the geometry."""
+    p = surface.degree[direction]
+    knots = surface.knots_u if direction == 0 else surface.knots_v
+    net = surface.control if direction == 0 else surface.control.transpose(1, 0, 2)
+    n = net.shape[0]
+    if n < 4:
+        return None
+    w = net[..., 3]
+    pts = net[..., :3] / w[..., None]
+    scale = float(np.abs(pts).max())
+    if np.abs(pts[0] - pts[-1]).max() > 1e-12 * scale or np.ptp(w[0] / w[-1]) > 1e-12:
+        return None
+    d_l, d_r = knots[n - 1 + p] - knots[n - 1], knots[p + 1] - knots[1]
+    ratio_l, ratio_r = w[n - 2] / w[n - 1], w[1] / w[0]
+    if not (d_l > 0.0 and d_r > 0.0) or np.ptp(ratio_l) > 1e-12 * ratio_l.max() \
+            or np.ptp(ratio_r) > 1e-12 * ratio_r.max():
+        return None
+    a = float((ratio_l[0] / d_l) / (ratio_l[0] / d_l + ratio_r[0] / d_r))
+    crease = np.abs(pts[0] - a * pts[n - 2] - (1.0 - a) * pts[1]).max()
+    return a if crease <= 1e-12 * scale else None
+
+
 def c1_extraction(surface: NurbsSurface) -> tuple[sp.csr_matrix, tuple[int, int]]:
     """``T`` (n_ctrl, n_free) with ``V = T Z`` and the free net's shape ``(n_u', n_v')``: the
     control rows at interior knots of full multiplicity (the joints of rational circles) are
-    tied to their neighbours so that the fitted displacement is C1 there (:func:`_tie`); free
-    controls keep their u-major order. The identity where there are no such knots."""
+    tied to their neighbours so that the fitted displacement is C1 there (:func:`_tie`), and
+    along a direction in which the patch closes on itself the two seam rows are one,
+    tied the same way (:func:`_seam_tie`: the fitted surface stays closed); free controls
+    keep their u-major order. The identity where there are no such knots or seams."""
     shape = surface.control.shape[:2]
     T = sp.identity(shape[0] * shape[1], format="csr")
     free = list(shape)
     for direction in (0, 1):
         p = surface.degree[direction]
+        n = shape[direction]
         knots = surface.knots_u if direction == 0 else surface.knots_v
         values, counts = np.unique(knots[p + 1: knots.size - p - 1], return_counts=True)
         rows = [int(np.searchsorted(knots, v, side="right")) - p - 1 for v, c in zip(values, counts) if c == p]
-        tied = {i: a for i in rows if (a := _tie(surface, direction, i)) is not None}
+        tied = {i: (i - 1, i + 1, a) for i in rows if (a := _tie(surface, direction, i)) is not None}
+        seam = _seam_tie(surface, direction)
+        if seam is not None and not {0, 1, n - 2, n - 1} & set(tied):
+            tied[0] = tied[n - 1] = (n - 2, 1, seam)
         if not tied:
             continue
-        n = shape[direction]
         keep = np.array([i for i in range(n) if i not in tied])
         col = np.full(n, -1)
         col[keep] = np.arange(keep.size)
         r, c, v = list(keep), list(col[keep]), [1.0] * keep.size       # 1D map (n, n_keep)
-        for i, a in tied.items():
+        for i, (left, right, a) in tied.items():
             r += [i, i]
-            c += [col[i - 1], col[i + 1]]
+            c += [col[left], col[right]]
             v += [a, 1.0 - a]
         step = sp.csr_matrix((v, (r, c)), shape=(n, keep.size))
         other = sp.identity(free[1 - direction], format="csr")

@@ -199,8 +199,10 @@ class ContactPair:
         rows = np.flatnonzero(active)
         n = u_s.size + u_m.size
         K = sp.csr_matrix((n, n))
-        # points in chunks: each carries (48, 48) blocks and their temporaries (a few kB)
-        for chunk in np.array_split(rows, max(1, -(-rows.size // CHUNK_POINTS))):
+        # points in chunks: each carries (D, D) blocks and their temporaries (a few kB at D = 48)
+        d = 3 * (self.frames.phi.shape[1] + self.surface.width)
+        per_chunk = max(64, CHUNK_POINTS * 48 ** 2 // d ** 2)
+        for chunk in np.array_split(rows, max(1, -(-rows.size // per_chunk))):
             if chunk.size:
                 Kc = self._add_points(chunk, st, hits, lam, u_s, u_m, tangent, r_s, r_m)
                 if Kc is not None:

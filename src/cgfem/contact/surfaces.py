@@ -137,10 +137,121 @@ class RayHits:
     slot: np.ndarray | None = None
 
 
-class NurbsFeSurface:
+class RaySurface:
+    """Ray tracing onto NURBS patches moved by a field (the shared part of
+    :class:`NurbsFeSurface` and :class:`~cgfem.contact.fitted.FittedSurface`).
+
+    A subclass sets ``seed_piece`` (n_seeds,) and ``seed_theta`` (n_seeds, 2) (its patches in
+    the numbering of its packed ``_layout``, ``_knots``), ``spacing`` (the largest distance
+    from a seed to its nearest neighbour) and ``h``, and implements
+    :meth:`_seed_positions`, :meth:`_may_hit` and :meth:`_kernel_data`.
+    """
+
+    seed_piece: np.ndarray
+    seed_theta: np.ndarray
+    spacing: float
+    h: float
+    _layout: np.ndarray
+    _knots: np.ndarray
+
+    def _seed_positions(self, u: np.ndarray) -> np.ndarray:
+        """Current positions (n_seeds, 3) of the seeds."""
+        raise NotImplementedError
+
+    def _may_hit(self, u: np.ndarray, x1: np.ndarray, max_gap: float, n1: np.ndarray) -> np.ndarray:
+        """(n,) bool: the ray segments may meet the surface (False: skip them)."""
+        raise NotImplementedError
+
+    def _kernel_data(self, u: np.ndarray) -> tuple:
+        """Arguments of :func:`cgfem.contact._ray_kernels.trace` at ``u``: ``(control, origin,
+        h, shape, elements, connectivity, nodal displacements, ray_tol)``."""
+        raise NotImplementedError
+
+    def search(self, u: np.ndarray, x1: np.ndarray, n1: np.ndarray, max_gap: float,
+               previous: RayHits | None = None) -> RayHits:
+        """Ray tracing from ``x1`` along ``n1`` (n, 3) to the current master surface, the
+        segment ``|g| <= max_gap`` of each ray. Starts, in order: the previous pairing (if
+        found; tried alone first, the seeds are looked up only for the rays it does not
+        pair), then the seeds nearest to samples of the segment taken at the seeds' spacing,
+        nearest to the ray first (those within twice the spacing of it, each seed once, from
+        the first ``4 CANDIDATES`` samples' seeds); a ray no seed lies near has none. The first
+        admissible hit of a point is kept (:func:`cgfem.contact._ray_kernels.trace`)."""
+        n = x1.shape[0]
+        best = RayHits(np.zeros(n, bool), np.zeros(n, np.int64), np.zeros((n, 2)), np.full(n, np.inf),
+                       np.full(n, -1, np.int64))
+        todo = np.arange(n)
+        if previous is not None and previous.found.any():
+            # the previous pairing alone first: from the second Newton iterate on it is
+            # almost always the hit, and the seeds are then needed only for the rest
+            rows = np.flatnonzero(previous.found)
+            before = previous.slot[rows] if previous.slot is not None else np.full(rows.size, -1, np.int64)
+            self._trace(u, x1, n1, rows, previous.piece[rows][:, None], previous.theta[rows][:, None],
+                        before[:, None], max_gap, best)
+            todo = np.flatnonzero(~best.found)
+        rows = todo[self._may_hit(u, x1[todo], max_gap, n1[todo])] if todo.size else todo
+        if rows.size:
+            piece, theta = self._starts(u, np.ascontiguousarray(x1[rows], dtype=float),
+                                        np.ascontiguousarray(n1[rows], dtype=float), max_gap)
+            self._trace(u, x1, n1, rows, piece, theta, np.full(piece.shape, -1, np.int64), max_gap, best)
+        return best
+
+    def _trace(self, u: np.ndarray, x1: np.ndarray, n1: np.ndarray, rows: np.ndarray, piece: np.ndarray,
+               theta: np.ndarray, start_slot: np.ndarray, max_gap: float, best: RayHits) -> None:
+        """Newton from the starts ``piece`` (k, c), ``theta`` (k, c, 2), ``start_slot`` (k, c)
+        of the rays ``rows`` (k,); their first admissible hits written into ``best``."""
+        k = rows.size
+        found, pc, th, g = np.zeros(k, bool), np.zeros(k, np.int64), np.zeros((k, 2)), np.full(k, np.inf)
+        status = np.zeros(k, np.int64)
+        slot = np.full(k, -1, np.int64)
+        control, origin, h, shape, elements, connectivity, nodal, ray_tol = self._kernel_data(u)
+        _rk.trace(np.ascontiguousarray(x1[rows], dtype=float), np.ascontiguousarray(n1[rows], dtype=float),
+                  np.ascontiguousarray(piece), np.ascontiguousarray(theta),
+                  np.ascontiguousarray(start_slot), float(max_gap), ray_tol,
+                  MAX_RAY_NEWTON, self._layout, self._knots, control, origin, h, shape, elements, LOCATE_TOL,
+                  connectivity, nodal, found, pc, th, g, slot, status)
+        if np.any(status == _rk.OUTSIDE):
+            raise ValueError(f"{int(np.sum(status == _rk.OUTSIDE))} surface points outside the active elements")
+        best.found[rows], best.piece[rows], best.theta[rows], best.g[rows] = found, pc, th, g
+        best.slot[rows] = np.where(found, slot, -1)
+
+    def _starts(self, u: np.ndarray, x1: np.ndarray, n1: np.ndarray, max_gap: float
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """Seed starts of rays ``x1``, ``n1`` (n, 3): patches (n, k) (-1 past the last) and
+        parameters (n, k, 2), nearest to the ray first. The hit's nearest seed lies within
+        the seeds' spacing of the ray: the segment is sampled at that spacing, the seeds
+        nearest to the samples are sorted by their distance to the ray, and those within
+        twice the spacing start Newton (none: no hit possible). Further seeds matter: a
+        start on the wrong side of a fold or a patch edge may not converge to the hit."""
+        n = x1.shape[0]
+        seeds_x = self._seed_positions(u)
+        m = int(np.ceil(2.0 * max_gap / self.spacing)) + 1
+        ts = np.linspace(-max_gap, max_gap, m)
+        samples = x1[:, None, :] + ts[None, :, None] * n1[:, None, :]
+        # sliding-midpoint splits: a median-split tree over points on a surface queried from
+        # off the surface is several times slower (the nearest seed is the same)
+        tree = cKDTree(seeds_x, leafsize=32, balanced_tree=False, compact_nodes=False)
+        _, idx = tree.query(samples.reshape(-1, 3), workers=numba.get_num_threads())
+        idx = idx.reshape(n, m)
+        v = seeds_x[idx] - x1[:, None, :]
+        off_ray = np.linalg.norm(v - np.einsum("pjk,pk->pj", v, n1)[:, :, None] * n1[:, None, :], axis=2)
+        order = np.argsort(off_ray, axis=1, kind="stable")[:, :min(m, 4 * CANDIDATES)]
+        near = np.take_along_axis(idx, order, axis=1)
+        use = np.take_along_axis(off_ray, order, axis=1) <= 2.0 * self.spacing
+        for c in range(1, near.shape[1]):                                # each seed once
+            use[:, c] &= np.all(near[:, :c] != near[:, c:c + 1], axis=1)
+        # the used seeds first, in their order
+        keep = np.argsort(~use, axis=1, kind="stable")
+        near = np.take_along_axis(near, keep, axis=1)
+        use = np.take_along_axis(use, keep, axis=1)
+        return np.where(use, self.seed_piece[near], -1), self.seed_theta[near]
+
+
+class NurbsFeSurface(RaySurface):
     """NURBS+FE contact surface of a body (exact patches + the body's H8 displacement)."""
 
     definition = "nurbs_fe"
+    #: nodes a surface point moves with (those of its grid element)
+    width = 8
 
     def __init__(self, solid: Solid, space: Space, surface: SurfaceQuadrature, patches: np.ndarray):
         """``surface``: a dense exact surface rule of the body (seeds of the search);
@@ -217,55 +328,6 @@ class NurbsFeSurface:
         normal = m2 / np.linalg.norm(m2, axis=1)[:, None]
         return MasterPoints(x, t, s, N, psi, slots, normal, self.space.connectivity[np.maximum(slots, 0)])
 
-    def search(self, u: np.ndarray, x1: np.ndarray, n1: np.ndarray, max_gap: float,
-               previous: RayHits | None = None) -> RayHits:
-        """Ray tracing from ``x1`` along ``n1`` (n, 3) to the current master surface, the
-        segment ``|g| <= max_gap`` of each ray. Starts, in order: the previous pairing (if
-        found; tried alone first, the seeds are looked up only for the rays it does not
-        pair), then the seeds nearest to samples of the segment taken at the seeds' spacing,
-        nearest to the ray first (those within twice the spacing of it, each seed once, from
-        the first ``4 CANDIDATES`` samples' seeds); a ray no seed lies near has none. The first
-        admissible hit of a point is kept (:func:`cgfem.contact._ray_kernels.trace`)."""
-        n = x1.shape[0]
-        best = RayHits(np.zeros(n, bool), np.zeros(n, np.int64), np.zeros((n, 2)), np.full(n, np.inf),
-                       np.full(n, -1, np.int64))
-        todo = np.arange(n)
-        if previous is not None and previous.found.any():
-            # the previous pairing alone first: from the second Newton iterate on it is
-            # almost always the hit, and the seeds are then needed only for the rest
-            rows = np.flatnonzero(previous.found)
-            before = previous.slot[rows] if previous.slot is not None else np.full(rows.size, -1, np.int64)
-            self._trace(u, x1, n1, rows, previous.piece[rows][:, None], previous.theta[rows][:, None],
-                        before[:, None], max_gap, best)
-            todo = np.flatnonzero(~best.found)
-        rows = todo[self._may_hit(u, x1[todo], max_gap, n1[todo])] if todo.size else todo
-        if rows.size:
-            piece, theta = self._starts(u, np.ascontiguousarray(x1[rows], dtype=float),
-                                        np.ascontiguousarray(n1[rows], dtype=float), max_gap)
-            self._trace(u, x1, n1, rows, piece, theta, np.full(piece.shape, -1, np.int64), max_gap, best)
-        return best
-
-    def _trace(self, u: np.ndarray, x1: np.ndarray, n1: np.ndarray, rows: np.ndarray, piece: np.ndarray,
-               theta: np.ndarray, start_slot: np.ndarray, max_gap: float, best: RayHits) -> None:
-        """Newton from the starts ``piece`` (k, c), ``theta`` (k, c, 2), ``start_slot`` (k, c)
-        of the rays ``rows`` (k,); their first admissible hits written into ``best``."""
-        k = rows.size
-        found, pc, th, g = np.zeros(k, bool), np.zeros(k, np.int64), np.zeros((k, 2)), np.full(k, np.inf)
-        status = np.zeros(k, np.int64)
-        slot = np.full(k, -1, np.int64)
-        grid = self.space.grid
-        _rk.trace(np.ascontiguousarray(x1[rows], dtype=float), np.ascontiguousarray(n1[rows], dtype=float),
-                  np.ascontiguousarray(piece), np.ascontiguousarray(theta),
-                  np.ascontiguousarray(start_slot), float(max_gap), RAY_TOL,
-                  MAX_RAY_NEWTON, self._layout, self._knots, self._control, np.asarray(grid.origin, float),
-                  float(self.h), np.asarray(grid.shape, np.int64), self.space.elements, LOCATE_TOL,
-                  self.space.connectivity, np.ascontiguousarray(u, dtype=float).reshape(-1, 3),
-                  found, pc, th, g, slot, status)
-        if np.any(status == _rk.OUTSIDE):
-            raise ValueError(f"{int(np.sum(status == _rk.OUTSIDE))} surface points outside the active elements")
-        best.found[rows], best.piece[rows], best.theta[rows], best.g[rows] = found, pc, th, g
-        best.slot[rows] = np.where(found, slot, -1)
-
     def _may_hit(self, u: np.ndarray, x1: np.ndarray, max_gap: float, n1: np.ndarray) -> np.ndarray:
         """(n,) bool: the ray segment ``x1 + g n1``, ``|g| <= max_gap`` ((n, 3) each), may
         meet the master. A master point ``x = Q + N . U2`` of element ``e`` lies in the box of
@@ -301,36 +363,11 @@ class NurbsFeSurface:
             may[rest[hit]] = True
         return may
 
-    def _starts(self, u: np.ndarray, x1: np.ndarray, n1: np.ndarray, max_gap: float
-                ) -> tuple[np.ndarray, np.ndarray]:
-        """Seed starts of rays ``x1``, ``n1`` (n, 3): patches (n, k) (-1 past the last) and
-        parameters (n, k, 2), nearest to the ray first. The hit's nearest seed lies within
-        the seeds' spacing of the ray: the segment is sampled at that spacing, the seeds
-        nearest to the samples are sorted by their distance to the ray, and those within
-        twice the spacing start Newton (none: no hit possible). Further seeds matter: a
-        start on the wrong side of a fold or a patch edge may not converge to the hit."""
-        n = x1.shape[0]
-        seeds_x = self._seed_positions(u)
-        m = int(np.ceil(2.0 * max_gap / self.spacing)) + 1
-        ts = np.linspace(-max_gap, max_gap, m)
-        samples = x1[:, None, :] + ts[None, :, None] * n1[:, None, :]
-        # sliding-midpoint splits: a median-split tree over points on a surface queried from
-        # off the surface is several times slower (the nearest seed is the same)
-        tree = cKDTree(seeds_x, leafsize=32, balanced_tree=False, compact_nodes=False)
-        _, idx = tree.query(samples.reshape(-1, 3), workers=numba.get_num_threads())
-        idx = idx.reshape(n, m)
-        v = seeds_x[idx] - x1[:, None, :]
-        off_ray = np.linalg.norm(v - np.einsum("pjk,pk->pj", v, n1)[:, :, None] * n1[:, None, :], axis=2)
-        order = np.argsort(off_ray, axis=1, kind="stable")[:, :min(m, 4 * CANDIDATES)]
-        near = np.take_along_axis(idx, order, axis=1)
-        use = np.take_along_axis(off_ray, order, axis=1) <= 2.0 * self.spacing
-        for c in range(1, near.shape[1]):                                # each seed once
-            use[:, c] &= np.all(near[:, :c] != near[:, c:c + 1], axis=1)
-        # the used seeds first, in their order
-        keep = np.argsort(~use, axis=1, kind="stable")
-        near = np.take_along_axis(near, keep, axis=1)
-        use = np.take_along_axis(use, keep, axis=1)
-        return np.where(use, self.seed_piece[near], -1), self.seed_theta[near]
+    def _kernel_data(self, u: np.ndarray) -> tuple:
+        grid = self.space.grid
+        return (self._control, np.asarray(grid.origin, float), float(self.h), np.asarray(grid.shape, np.int64),
+                self.space.elements, self.space.connectivity, np.ascontiguousarray(u, dtype=float).reshape(-1, 3),
+                RAY_TOL)
 
     def _seed_positions(self, u: np.ndarray) -> np.ndarray:
         """Current positions (n_seeds, 3) of the seeds."""
@@ -342,6 +379,8 @@ class FacetSurface:
     """Linear-facet contact surface (marching-cubes triangles moved with the FE field)."""
 
     definition = "facets"
+    #: nodes a surface point moves with (those of its grid element)
+    width = 8
 
     def __init__(self, space: Space, triangles: np.ndarray, elements: np.ndarray, keep: np.ndarray):
         """``triangles`` (m, 3, 3) reference vertices (counterclockwise about the outward

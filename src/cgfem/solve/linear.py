@@ -196,23 +196,23 @@ def _mkl_rt() -> str:
 class _Pardiso(_DirectSolver):
     backend = "pardiso"
 
-    def __init__(self, A: sp.csr_matrix, symmetric: bool) -> None:
+    def __init__(self, A: sp.csr_matrix, symmetric: bool, indefinite: bool = False) -> None:
         from pypardiso.pardiso_wrapper import PyPardisoError, PyPardisoSolver
 
         super().__init__(A.shape[0])
         if np.any(np.diff(A.indptr) == 0):
             raise LinearSolverError("pardiso: the matrix has empty rows (singular matrix)")
         mtype, M = 11, A
-        if symmetric:  # type -2 (symmetric indefinite) reads the upper triangle, which must
-            # store every diagonal entry: missing ones (a saddle point's zero block) are stored
-            # as explicit zeros
-            U = sp.triu(A, format="coo")
-            i = np.arange(self.n)
-            U = sp.coo_matrix((np.concatenate([U.data, np.zeros(self.n)]),
-                               (np.concatenate([U.row, i]), np.concatenate([U.col, i]))),
-                              shape=A.shape).tocsr()          # sums duplicates, keeps zeros
+        # type -2 (symmetric indefinite) reads the upper triangle, which must store every
+        # diagonal entry. Not for saddle points (indefinite): on nurbs_fit's constrained
+        # system type -2 returned garbage (relative residual 7e7) with and without MKL's
+        # matching and scaling, where type 11 solves it to 1e-14
+        if symmetric and not indefinite:
+            U = sp.triu(A, format="csr")
             U.sort_indices()
-            mtype, M = -2, U
+            starts = U.indptr[:-1]
+            if np.all(np.diff(U.indptr) > 0) and np.all(U.indices[starts] == np.arange(self.n)):
+                mtype, M = -2, U
         self._M, self._matvec = M, A.dot  # the check uses all of A, not just its upper half
         if "PYPARDISO_MKL_RT" in os.environ:
             self._solver = PyPardisoSolver(mtype=mtype)
@@ -313,7 +313,7 @@ def factorize(A: sp.spmatrix, *, backend: str = "auto", symmetric: bool = True,
     if name == "superlu":
         solver = _SuperLU(A, symmetric)
     elif name == "pardiso":
-        solver = _Pardiso(A, symmetric)
+        solver = _Pardiso(A, symmetric, indefinite)
     else:
         solver = _AMG(A, symmetric, near_null, rtol)
     solver.info.update(backend=name, symmetric=symmetric, setup_s=time.perf_counter() - t0)
