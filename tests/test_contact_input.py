@@ -30,6 +30,8 @@ def _with_contact(entries: list[dict]) -> dict:
      "contact[0].master_patches[0]", "unknown patch 'lid'"),
     ([{"slave": "lower", "master": "upper", "kappa": 0.0}], "contact[0].kappa", ""),
     ([{"slave": "lower", "master": "upper", "kappa": -3.0}], "contact[0].kappa", ""),
+    ([{"slave": "lower", "master": "upper", "fit": "fine"}], "contact[0].fit", ""),
+    ([{"slave": "lower", "master": "upper", "fit": -1}], "contact[0].fit", ""),
 ])
 def test_bad_contact_entries(tmp_path, entries, field, words):
     with pytest.raises(InputError) as err:
@@ -55,3 +57,10 @@ def test_patches_restrict_the_pair(tmp_path):
     assert case.contact[0].slave_patches == ("zmax",)
     assert case.contact[0].master_patches == ("zmin",)
     assert parse_case(_with_contact([{"slave": "lower", "master": "upper"}]), tmp_path).contact[0].slave_patches is None
+
+
+@pytest.mark.parametrize("fit", ["auto", "none", 0, 3])
+def test_fit_option(tmp_path, fit):
+    case = parse_case(_with_contact([{"slave": "lower", "master": "upper", "fit": fit}]), tmp_path)
+    assert case.contact[0].fit == fit
+    assert parse_case(_with_contact([{"slave": "lower", "master": "upper"}]), tmp_path).contact[0].fit == "auto"
