@@ -1,0 +1,88 @@
+"""``nurbs_fit`` against ``nurbs_fe`` on chain2_steel (issue "nurbs_fit ... kept sparse").
+
+For each level, each definition runs ``cgfem run`` in its own process (so peak memories do
+not mix) and reports: unknowns (the bodies' dofs, plus the fitted patches' control
+displacements and multipliers for nurbs_fit), nonzeros per unknown of every matrix the
+linear solver factorized (largest over the run) and of its factor, Newton iterations, solve
+time, time per Newton iteration and the peak resident memory. The last lines give the ratios
+nurbs_fit / nurbs_fe measured in the same run (targets: time <= 3x, memory <= 2x, nonzeros
+per unknown within 20 %).
+
+    python3 benchmarks/bench_fit.py [levels ...]        # default: 1 2
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+CASE = REPO / "config" / "cases" / "chain2_steel.yaml"
+SURFACES = ("nurbs_fe", "nurbs_fit")
+
+
+def one_run(level: int, surface: str, folder: Path) -> dict:
+    """Run one analysis in this process (a child) and return its figures."""
+    import resource
+
+    import cgfem.solve.static as static
+    from cgfem.case.load import load_case
+    from cgfem.run import run_case
+
+    matrices: list[dict] = []
+    factorize = static.factorize
+
+    def counting(A, **kwargs):
+        solver = factorize(A, **kwargs)
+        matrices.append({"n": int(A.shape[0]), "nnz": int(A.nnz), "factor_nnz": int(solver.info.get("factor_nnz", 0)),
+                         "backend": solver.backend})
+        return solver
+
+    static.factorize = counting
+    status = run_case(load_case(CASE), level, surface, folder / "out")
+    summary = json.loads(status.summary.read_text())
+    iterations = sum(len(r) - 1 for s in summary["steps"] for r in s["pass_residuals"])
+    solve = summary["timings"]["solve_s"]
+    widest = max(matrices, key=lambda m: m["nnz"] / m["n"])
+    return {"level": level, "surface": surface, "status": summary["status"], "unknowns": widest["n"],
+            "dofs": sum(b["dofs"] for b in summary["bodies"].values()),
+            "nnz_per_unknown": widest["nnz"] / widest["n"], "factor_nnz_per_unknown": widest["factor_nnz"] / widest["n"],
+            "backend": widest["backend"], "factorizations": len(matrices), "newton": iterations,
+            "build_s": summary["timings"]["build_s"], "solve_s": solve, "s_per_newton": solve / max(iterations, 1),
+            "peak_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
+
+
+def main(levels: list[int]) -> None:
+    rows = []
+    print(f"{'L':>2} {'surface':9} {'status':10} {'unknowns':>9} {'dofs':>8} {'nnz/unk':>8} {'LU/unk':>8} "
+          f"{'newton':>6} {'solve s':>8} {'s/newton':>9} {'peak MiB':>9}", flush=True)
+    for level in levels:
+        for surface in SURFACES:
+            with tempfile.TemporaryDirectory() as tmp:
+                code = (f"import json, sys; sys.path.insert(0, {str(REPO / 'benchmarks')!r}); import bench_fit; "
+                        f"from pathlib import Path; print(json.dumps(bench_fit.one_run({level}, {surface!r}, Path({tmp!r}))))")
+                out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+                if out.returncode != 0:
+                    print(f"{level:>2} {surface:9} error: {out.stderr.strip().splitlines()[-1]}", flush=True)
+                    continue
+                r = json.loads(out.stdout.strip().splitlines()[-1])
+            rows.append(r)
+            print(f"{level:>2} {surface:9} {r['status']:10} {r['unknowns']:>9} {r['dofs']:>8} "
+                  f"{r['nnz_per_unknown']:>8.1f} {r['factor_nnz_per_unknown']:>8.1f} {r['newton']:>6} "
+                  f"{r['solve_s']:>8.1f} {r['s_per_newton']:>9.2f} {r['peak_mib']:>9.0f}", flush=True)
+    print("\nratios nurbs_fit / nurbs_fe (targets: time <= 3, memory <= 2, nnz per unknown <= 1.2):")
+    for level in levels:
+        pair = {r["surface"]: r for r in rows if r["level"] == level}
+        if len(pair) == 2:
+            fe, fit = pair["nurbs_fe"], pair["nurbs_fit"]
+            print(f"  L{level}: time per Newton iteration {fit['s_per_newton'] / fe['s_per_newton']:.2f}, "
+                  f"solve time {fit['solve_s'] / fe['solve_s']:.2f}, peak memory {fit['peak_mib'] / fe['peak_mib']:.2f}, "
+                  f"nnz per unknown {fit['nnz_per_unknown'] / fe['nnz_per_unknown']:.2f}, "
+                  f"factor nnz per unknown {fit['factor_nnz_per_unknown'] / max(fe['factor_nnz_per_unknown'], 1e-300):.2f}")
+
+
+if __name__ == "__main__":
+    main([int(a) for a in sys.argv[1:]] or [1, 2])
