@@ -142,3 +142,33 @@ def test_chattering_points_are_held_then_released():
     assert np.all(lam[held & ~active] == 0.0)
     pair.begin_pass()
     assert pair.contradicted() == 0 and not pair.state.held.any()
+
+
+def test_candidate_list_keeps_every_hit(definition):
+    """The search runs on a Verlet list of slave points (``ContactPair.candidates``): it
+    finds exactly the hits of a search over all points, is reused while the bodies move by
+    less than its skin and rebuilt after, and drops points out of reach."""
+    from cgfem.contact.pair import SKIN
+    pair = _pair(definition, False)
+    n_s, n_m = pair.slave_space.n_dofs, pair.master_space.n_dofs
+    rng = np.random.default_rng(4)
+    u = 0.02 * rng.standard_normal(n_s + n_m)
+    down = np.zeros(n_s + n_m)
+    down[2:n_s:3] = -1.0                                     # slave translation along -z
+
+    def same_as_full(v):
+        st, hits = pair.search(v[:n_s], v[n_s:])
+        full = pair.surface.search(v[n_s:], st.x, st.n, pair.max_gap)
+        np.testing.assert_array_equal(hits.found, full.found)
+        np.testing.assert_allclose(hits.g[hits.found], full.g[full.found], atol=1e-12)
+        return hits
+
+    assert same_as_full(u).found.sum() > 50
+    built = pair.state.candidates[0]
+    same_as_full(u + 0.4 * SKIN * pair.max_gap * down)      # within the skin: reused
+    assert pair.state.candidates[0] is built
+    same_as_full(u + 1.5 * SKIN * pair.max_gap * down)      # beyond it: rebuilt
+    assert pair.state.candidates[0] is not built
+    far = u - 10.0 * pair.max_gap * down                    # lifted far off the sphere
+    assert not same_as_full(far).found.any()
+    assert pair.state.candidates[0].size == 0 and pair.state.candidates[1].size == 0

@@ -166,8 +166,9 @@ class FittedSurface(RaySurface):
         return MasterPoints(d[:, 0], t, s, coef[:, 0], coef[:, 1:3], np.full(piece.size, -1, np.int64),
                             normal, nodes)
 
-    def _seed_positions(self, z: np.ndarray) -> np.ndarray:
-        return self._seed_X + self._seed_S @ np.asarray(z, float).reshape(-1, 3)
+    def _seed_positions(self, z: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        rows = slice(None) if rows is None else rows
+        return self._seed_X[rows] + self._seed_S[rows] @ np.asarray(z, float).reshape(-1, 3)
 
     def _may_hit(self, z: np.ndarray, x1: np.ndarray, max_gap: float, n1: np.ndarray) -> np.ndarray:
         """Every ray is tried (a ray no seed lies near gets no start)."""

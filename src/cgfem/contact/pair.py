@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.spatial import cKDTree
 
 from cgfem.contact.kinematics import (SlaveFrames, area_weight, gap_derivatives, gap_gradient_direction,
                                       slave_state)
@@ -52,6 +53,8 @@ MAX_SWITCHES = 10
 #: largest |gap| searched, in element sizes: a point is active only while
 #: p_N + (kappa E / h) g <= 0, i.e. for gaps below |p_N| h / (kappa E), far below h
 MAX_GAP_H = 1.0
+#: skin of the search's candidate list, in units of the largest gap searched
+SKIN = 0.25
 #: a gap below this fraction of h counts as closed when the active set is decided (initially
 #: touching surfaces, round-off of the facet intersections); lambda_N itself is unchanged
 CLOSED_GAP_H = 1e-9
@@ -71,6 +74,9 @@ class ContactState:
     held_active: np.ndarray | None = None
     #: the points' own rule at the last linearization point, held or not
     natural: np.ndarray | None = None
+    #: the Verlet list of the search (:meth:`ContactPair.candidates`): the slave points, the
+    #: master samples and the kinematic vectors it was built at
+    candidates: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
 
 
 @dataclass(frozen=True)
@@ -144,9 +150,37 @@ class ContactPair:
 
     def search(self, u_s: np.ndarray, u_m: np.ndarray) -> tuple:
         """Current slave geometry (:class:`SlaveState`) and its master hits (the previous
-        pairing first)."""
+        pairing first), searched for the candidate points only (:meth:`candidates`)."""
         st = self._slave(u_s)[1]
-        return st, self.surface.search(u_m, st.x, st.n, self.max_gap, self.state.hits)
+        rows, near = self.candidates(u_s, u_m, st.x)
+        previous = None if self.state.hits is None else self.state.hits.select(rows)
+        sub = self.surface.search(u_m, st.x[rows], st.n[rows], self.max_gap, previous, near)
+        return st, RayHits.scatter(sub, rows, self.n_points)
+
+    def candidates(self, u_s: np.ndarray, u_m: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A Verlet list of the search: the slave points (indices) that may have a master
+        hit, those within ``reach = max_gap + radius + skin`` of one of the master's surface
+        samples (:meth:`samples`, every surface point within ``radius`` of one) when the list
+        was built, and the samples within ``reach`` of one of those points (the only seeds or
+        triangles their rays can need); ``skin = SKIN * max_gap``. It is rebuilt once the
+        slave points and the master surface may have moved towards each other by more than
+        ``skin``: the largest nodal move of the slave's plus the master's kinematic vector
+        (points are convex combinations of their nodes: trilinear, barycentric and NURBS
+        weights are non-negative). ``x`` (n, 3): the current slave points."""
+        skin = SKIN * self.max_gap
+        c = self.state.candidates
+        if c is not None and c[2].shape == u_s.shape and c[3].shape == u_m.shape \
+                and _largest_move(u_s - c[2]) + _largest_move(u_m - c[3]) <= skin:
+            return c[0], c[1]
+        points, radius = self.surface.samples(u_m)
+        reach = self.max_gap + radius + skin
+        rows = near = np.zeros(0, np.int64)
+        if points.shape[0] and x.shape[0]:
+            rows = np.flatnonzero(cKDTree(points).query(x, distance_upper_bound=reach)[0] <= reach)
+            if rows.size:
+                near = np.flatnonzero(cKDTree(x[rows]).query(points, distance_upper_bound=reach)[0] <= reach)
+        self.state.candidates = (rows, near, u_s.copy(), u_m.copy())
+        return rows, near
 
     def freeze(self, u_s: np.ndarray, u_body: np.ndarray, recovered: np.ndarray | None) -> None:
         """Freeze ``p_N = n . sigma* . n`` at the slave points from the slave's recovered
@@ -198,23 +232,30 @@ class ContactPair:
         r_m = np.zeros(u_m.size)
         rows = np.flatnonzero(active)
         n = u_s.size + u_m.size
-        K = sp.csr_matrix((n, n))
-        # points in chunks: each carries (D, D) blocks and their temporaries (a few kB at D = 48)
+        # points in chunks: each carries (D, D) blocks and their temporaries (a few kB at D = 48);
+        # the triplets of several chunks are summed chunk by chunk (memory)
         d = 3 * (self.frames.phi.shape[1] + self.surface.width)
         per_chunk = max(64, CHUNK_POINTS * 48 ** 2 // d ** 2)
-        for chunk in np.array_split(rows, max(1, -(-rows.size // per_chunk))):
-            if chunk.size:
-                Kc = self._add_points(chunk, st, hits, lam, u_s, u_m, tangent, r_s, r_m)
-                if Kc is not None:
-                    K = K + Kc
+        chunks = [c for c in np.array_split(rows, max(1, -(-rows.size // per_chunk))) if c.size]
+        K = None
+        for chunk in chunks:
+            trip = self._add_points(chunk, st, hits, lam, u_s, u_m, tangent, r_s, r_m)
+            if trip is not None and len(chunks) > 1:
+                Kc = sp.coo_matrix((trip[2], (trip[0], trip[1])), shape=(n, n)).tocsr()
+                K = Kc if K is None else K + Kc
+            elif trip is not None:
+                return r_s, r_m, trip
         if not tangent:
             return r_s, r_m, None
+        if K is None:
+            return r_s, r_m, (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
         K = K.tocoo()
         return r_s, r_m, (K.row.astype(np.int64), K.col.astype(np.int64), K.data)
 
-    def _add_points(self, rows, st, hits, lam, u_s, u_m, tangent, r_s, r_m) -> sp.csr_matrix | None:
-        """Residual of the slave points ``rows`` added to ``r_s``, ``r_m``; their tangent (CSR on
-        the local dofs: slave dofs, then master dofs + ``u_s.size``) if asked."""
+    def _add_points(self, rows, st, hits, lam, u_s, u_m, tangent, r_s, r_m) -> tuple | None:
+        """Residual of the slave points ``rows`` added to ``r_s``, ``r_m``; their tangent (COO
+        triplets ``(rows, cols, values)`` on the local dofs: slave dofs, then master dofs +
+        ``u_s.size``; duplicates not summed) if asked."""
         frames = self.frames.select(rows)
         st_r = type(st)(*(getattr(st, f)[rows] for f in ("x", "a", "b", "m", "n", "norm_m")))
         mp = self.surface.evaluate(u_m, hits.piece[rows], hits.theta[rows], slot=_slots(hits, rows))
@@ -234,8 +275,7 @@ class ContactPair:
         size = dofs.shape[1]
         rr = np.repeat(dofs, size, axis=1).ravel()
         cc = np.tile(dofs, (1, size)).ravel()
-        n = u_s.size + u_m.size
-        return sp.coo_matrix((K.ravel(), (rr, cc)), shape=(n, n)).tocsr()
+        return rr, cc, K.ravel()
 
     def _multiplier(self, hits: RayHits) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``lambda_N`` (n,), the status used (n,) (held points as held) and the points' own
@@ -270,6 +310,11 @@ class ContactPair:
             force[rows] = -(w[rows] * lam[rows])[:, None] * gap_gradient_direction(t, st.n[rows])
         return ContactPoints(st.x, st.n, np.where(hits.found, hits.g, np.nan), lam, active, w,
                              self.state.p_N.copy(), force)
+
+
+def _largest_move(du: np.ndarray) -> float:
+    """The largest nodal displacement norm of ``du`` (3 n,)."""
+    return float(np.sqrt(np.max(np.sum(du.reshape(-1, 3) ** 2, axis=1), initial=0.0)))
 
 
 def node_dofs(nodes: np.ndarray) -> np.ndarray:

@@ -136,6 +136,21 @@ class RayHits:
     g: np.ndarray
     slot: np.ndarray | None = None
 
+    def select(self, rows: np.ndarray) -> "RayHits":
+        """The hits of rays ``rows``."""
+        return RayHits(self.found[rows], self.piece[rows], self.theta[rows], self.g[rows],
+                       None if self.slot is None else self.slot[rows])
+
+    @classmethod
+    def scatter(cls, sub: "RayHits", rows: np.ndarray, n: int) -> "RayHits":
+        """Hits of ``n`` rays: ``sub`` at rays ``rows``, none elsewhere."""
+        out = cls(np.zeros(n, bool), np.zeros(n, np.int64), np.zeros((n, 2)), np.full(n, np.inf),
+                  np.full(n, -1, np.int64))
+        out.found[rows], out.piece[rows], out.theta[rows], out.g[rows] = sub.found, sub.piece, sub.theta, sub.g
+        if sub.slot is not None:
+            out.slot[rows] = sub.slot
+        return out
+
 
 class RaySurface:
     """Ray tracing onto NURBS patches moved by a field (the shared part of
@@ -154,8 +169,8 @@ class RaySurface:
     _layout: np.ndarray
     _knots: np.ndarray
 
-    def _seed_positions(self, u: np.ndarray) -> np.ndarray:
-        """Current positions (n_seeds, 3) of the seeds."""
+    def _seed_positions(self, u: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        """Current positions (n_seeds, 3) of the seeds (of seeds ``rows`` only)."""
         raise NotImplementedError
 
     def _may_hit(self, u: np.ndarray, x1: np.ndarray, max_gap: float, n1: np.ndarray) -> np.ndarray:
@@ -167,15 +182,23 @@ class RaySurface:
         h, shape, elements, connectivity, nodal displacements, ray_tol)``."""
         raise NotImplementedError
 
+    def samples(self, u: np.ndarray) -> tuple[np.ndarray, float]:
+        """Points (m, 3) of the current surface and a radius: every surface point lies within
+        the radius of one of them (the seeds, twice their spacing)."""
+        return self._seed_positions(u), 2.0 * self.spacing
+
     def search(self, u: np.ndarray, x1: np.ndarray, n1: np.ndarray, max_gap: float,
-               previous: RayHits | None = None) -> RayHits:
+               previous: RayHits | None = None, near: np.ndarray | None = None) -> RayHits:
         """Ray tracing from ``x1`` along ``n1`` (n, 3) to the current master surface, the
         segment ``|g| <= max_gap`` of each ray. Starts, in order: the previous pairing (if
         found; tried alone first, the seeds are looked up only for the rays it does not
         pair), then the seeds nearest to samples of the segment taken at the seeds' spacing,
         nearest to the ray first (those within twice the spacing of it, each seed once, from
         the first ``4 CANDIDATES`` samples' seeds); a ray no seed lies near has none. The first
-        admissible hit of a point is kept (:func:`cgfem.contact._ray_kernels.trace`)."""
+        admissible hit of a point is kept (:func:`cgfem.contact._ray_kernels.trace`).
+        ``near``: the seeds (indices of :meth:`samples`) that may start a ray (every seed
+        within reach of the rays; default all, and then rays out of reach of the master's
+        element boxes are skipped first, :meth:`_may_hit`)."""
         n = x1.shape[0]
         best = RayHits(np.zeros(n, bool), np.zeros(n, np.int64), np.zeros((n, 2)), np.full(n, np.inf),
                        np.full(n, -1, np.int64))
@@ -188,10 +211,13 @@ class RaySurface:
             self._trace(u, x1, n1, rows, previous.piece[rows][:, None], previous.theta[rows][:, None],
                         before[:, None], max_gap, best)
             todo = np.flatnonzero(~best.found)
-        rows = todo[self._may_hit(u, x1[todo], max_gap, n1[todo])] if todo.size else todo
+        if near is None and todo.size:
+            rows = todo[self._may_hit(u, x1[todo], max_gap, n1[todo])]
+        else:
+            rows = todo if near is None or near.size else todo[:0]
         if rows.size:
             piece, theta = self._starts(u, np.ascontiguousarray(x1[rows], dtype=float),
-                                        np.ascontiguousarray(n1[rows], dtype=float), max_gap)
+                                        np.ascontiguousarray(n1[rows], dtype=float), max_gap, near)
             self._trace(u, x1, n1, rows, piece, theta, np.full(piece.shape, -1, np.int64), max_gap, best)
         return best
 
@@ -214,16 +240,18 @@ class RaySurface:
         best.found[rows], best.piece[rows], best.theta[rows], best.g[rows] = found, pc, th, g
         best.slot[rows] = np.where(found, slot, -1)
 
-    def _starts(self, u: np.ndarray, x1: np.ndarray, n1: np.ndarray, max_gap: float
-                ) -> tuple[np.ndarray, np.ndarray]:
+    def _starts(self, u: np.ndarray, x1: np.ndarray, n1: np.ndarray, max_gap: float,
+                near: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Seed starts of rays ``x1``, ``n1`` (n, 3): patches (n, k) (-1 past the last) and
         parameters (n, k, 2), nearest to the ray first. The hit's nearest seed lies within
         the seeds' spacing of the ray: the segment is sampled at that spacing, the seeds
         nearest to the samples are sorted by their distance to the ray, and those within
         twice the spacing start Newton (none: no hit possible). Further seeds matter: a
-        start on the wrong side of a fold or a patch edge may not converge to the hit."""
+        start on the wrong side of a fold or a patch edge may not converge to the hit.
+        ``near``: the seeds to use (default all)."""
         n = x1.shape[0]
-        seeds_x = self._seed_positions(u)
+        near = np.arange(self.seed_piece.size) if near is None else np.asarray(near, np.int64)
+        seeds_x = self._seed_positions(u, near)
         m = int(np.ceil(2.0 * max_gap / self.spacing)) + 1
         ts = np.linspace(-max_gap, max_gap, m)
         samples = x1[:, None, :] + ts[None, :, None] * n1[:, None, :]
@@ -233,17 +261,18 @@ class RaySurface:
         _, idx = tree.query(samples.reshape(-1, 3), workers=numba.get_num_threads())
         idx = idx.reshape(n, m)
         v = seeds_x[idx] - x1[:, None, :]
+        idx = near[idx]
         off_ray = np.linalg.norm(v - np.einsum("pjk,pk->pj", v, n1)[:, :, None] * n1[:, None, :], axis=2)
         order = np.argsort(off_ray, axis=1, kind="stable")[:, :min(m, 4 * CANDIDATES)]
-        near = np.take_along_axis(idx, order, axis=1)
+        chosen = np.take_along_axis(idx, order, axis=1)
         use = np.take_along_axis(off_ray, order, axis=1) <= 2.0 * self.spacing
-        for c in range(1, near.shape[1]):                                # each seed once
-            use[:, c] &= np.all(near[:, :c] != near[:, c:c + 1], axis=1)
+        for c in range(1, chosen.shape[1]):                              # each seed once
+            use[:, c] &= np.all(chosen[:, :c] != chosen[:, c:c + 1], axis=1)
         # the used seeds first, in their order
         keep = np.argsort(~use, axis=1, kind="stable")
-        near = np.take_along_axis(near, keep, axis=1)
+        chosen = np.take_along_axis(chosen, keep, axis=1)
         use = np.take_along_axis(use, keep, axis=1)
-        return np.where(use, self.seed_piece[near], -1), self.seed_theta[near]
+        return np.where(use, self.seed_piece[chosen], -1), self.seed_theta[chosen]
 
 
 class NurbsFeSurface(RaySurface):
@@ -369,10 +398,11 @@ class NurbsFeSurface(RaySurface):
                 self.space.elements, self.space.connectivity, np.ascontiguousarray(u, dtype=float).reshape(-1, 3),
                 RAY_TOL)
 
-    def _seed_positions(self, u: np.ndarray) -> np.ndarray:
-        """Current positions (n_seeds, 3) of the seeds."""
-        U = element_values(self.space, u, self._seed_slot)
-        return self._seed_X + np.einsum("pa,pak->pk", self._seed_N, U)
+    def _seed_positions(self, u: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        """Current positions (n_seeds, 3) of the seeds (of seeds ``rows`` only)."""
+        rows = slice(None) if rows is None else rows
+        U = element_values(self.space, u, self._seed_slot[rows])
+        return self._seed_X[rows] + np.einsum("pa,pak->pk", self._seed_N[rows], U)
 
 
 class FacetSurface:
@@ -424,49 +454,83 @@ class FacetSurface:
         return MasterPoints(x, t, np.zeros((piece.size, 2, 2, 3)), phi, psi, self.slot[piece], normal,
                             self.space.connectivity[self.slot[piece]])
 
+    def _vertices(self, u: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
+        """Current vertices (m, 3, 3) of the candidate triangles (those ``near`` of them)."""
+        cand = self.candidates if near is None else self.candidates[near]
+        U = u.reshape(-1, 3)[self.space.connectivity[self.slot[cand]]]          # (m, 8, 3)
+        return self.triangles[cand] + np.einsum("mva,mak->mvk", self.vertex_N[cand], U)
+
+    def samples(self, u: np.ndarray) -> tuple[np.ndarray, float]:
+        """The candidate triangles' centroids (m, 3) and the largest distance from a centroid
+        to its triangle's vertices."""
+        verts = self._vertices(u)
+        centroid = verts.mean(axis=1)
+        return centroid, float(np.linalg.norm(verts - centroid[:, None], axis=2).max(initial=0.0))
+
     def search(self, u: np.ndarray, x1: np.ndarray, n1: np.ndarray, max_gap: float,
-               previous: RayHits | None = None) -> RayHits:
+               previous: RayHits | None = None, near: np.ndarray | None = None) -> RayHits:
         """Nearest admissible hit of each ray ``x1 + g n1`` (n, 3) on the current triangles.
         A point whose ``previous`` hit lay on a triangle keeps it while the ray meets that
         triangle's plane within ``STICKY`` (barycentric) of its edges: a hit on an edge
         otherwise jumps between the two triangles' normals from one Newton iterate to the
-        next."""
+        next. ``near``: the triangles (indices of :meth:`samples`) the rays may hit (default
+        all)."""
         n = x1.shape[0]
-        cand = self.candidates
-        U = u.reshape(-1, 3)[self.space.connectivity[self.slot[cand]]]          # (m, 8, 3)
-        verts = self.triangles[cand] + np.einsum("mva,mak->mvk", self.vertex_N[cand], U)
+        cand = self.candidates if near is None else self.candidates[near]
+        best = RayHits(np.zeros(n, bool), np.zeros(n, np.int64), np.zeros((n, 2)), np.full(n, np.inf),
+                       np.full(n, -1, np.int64))
+        if cand.size == 0:
+            return best
+        verts = self._vertices(u, near)
+        todo = np.arange(n)
+        if previous is not None and previous.piece.shape == (n,) and previous.found.any():
+            # the kept triangle alone first: where the ray still meets it (within STICKY) it
+            # is the hit, whatever else the ray meets
+            local = np.full(self.triangles.shape[0], -1, np.int64)
+            local[cand] = np.arange(cand.size)
+            rows = np.flatnonzero(previous.found)
+            tris = local[previous.piece[rows]]
+            rows, tris = rows[tris >= 0], tris[tris >= 0]
+            self._take(best, cand, *self._hits(x1, n1, rows, tris, verts, _rk.STICKY, max_gap), nearest=False)
+            todo = np.flatnonzero(~best.found)
+        if todo.size == 0:
+            return best
         centroid = verts.mean(axis=1)
         radius = np.linalg.norm(verts - centroid[:, None], axis=2).max()
-        tree = cKDTree(centroid)
-        best = RayHits(np.zeros(n, bool), np.zeros(n, np.int64), np.zeros((n, 2)), np.full(n, np.inf))
-        kept = np.full(n, -1, np.int64)
-        if previous is not None and previous.piece.shape == (n,):
-            kept[previous.found] = previous.piece[previous.found]
-        pairs = tree.query_ball_point(x1, r=max_gap + radius)
-        rows = np.repeat(np.arange(n), [len(p) for p in pairs])
-        if rows.size == 0:
-            return best
-        tris = np.concatenate([np.asarray(p, np.int64) for p in pairs if len(p)])
+        pairs = cKDTree(centroid).query_ball_point(x1[todo], r=max_gap + radius)
+        rows = np.repeat(todo, [len(p) for p in pairs])
+        if rows.size:
+            tris = np.concatenate([np.asarray(p, np.int64) for p in pairs if len(p)])
+            self._take(best, cand, *self._hits(x1, n1, rows, tris, verts, FACET_TOL, max_gap), nearest=True)
+        return best
+
+    def _hits(self, x1: np.ndarray, n1: np.ndarray, rows: np.ndarray, tris: np.ndarray, verts: np.ndarray,
+              band: float, max_gap: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Admissible hits of the pairs (ray ``rows[k]``, triangle ``tris[k]`` of ``verts``):
+        barycentric coordinates within ``band`` of the triangle, normal against the ray,
+        ``|g| <= max_gap``. Returns the pairs that hit: their rays, triangles, ``l1``, ``l2``
+        and ``g``."""
         v = verts[tris]
         e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
         J = np.stack([e1, e2, -n1[rows]], axis=2)
-        det = np.linalg.det(J)
-        good = np.abs(det) > 1e-30 * self.h ** 2
+        good = np.abs(np.linalg.det(J)) > 1e-30 * self.h ** 2
         sol = np.full((rows.size, 3), np.nan)
         sol[good] = np.linalg.solve(J[good], (x1[rows] - v[:, 0])[good][..., None])[..., 0]
         l1, l2, g = sol[:, 0], sol[:, 1], sol[:, 2]
-        # a hit may stay on the triangle it had by up to STICKY (barycentric) past its edges
-        band = np.where(cand[tris] == kept[rows], _rk.STICKY, FACET_TOL)
         inside = good & (l1 >= -band) & (l2 >= -band) & (l1 + l2 <= 1.0 + band)
-        normal = np.cross(e1, e2)
-        inside &= (np.einsum("pk,pk->p", normal, n1[rows]) < 0.0) & (np.abs(g) <= max_gap)
-        hit = np.flatnonzero(inside)
-        # per point: the kept triangle first, then the nearest hit
-        order = hit[np.lexsort((np.abs(g[hit]), cand[tris[hit]] != kept[rows[hit]], rows[hit]))]
-        first = order[np.concatenate([[True], rows[order][1:] != rows[order][:-1]])] if order.size else order
-        r = rows[first]
-        best.found[r] = True
-        best.piece[r] = cand[tris[first]]
-        best.theta[r] = np.column_stack([l1[first], l2[first]])
-        best.g[r] = g[first]
-        return RayHits(best.found, best.piece, best.theta, best.g, np.where(best.found, self.slot[best.piece], -1))
+        inside &= (np.einsum("pk,pk->p", np.cross(e1, e2), n1[rows]) < 0.0) & (np.abs(g) <= max_gap)
+        k = np.flatnonzero(inside)
+        return rows[k], tris[k], l1[k], l2[k], g[k]
+
+    def _take(self, best: RayHits, cand: np.ndarray, rows: np.ndarray, tris: np.ndarray, l1: np.ndarray,
+              l2: np.ndarray, g: np.ndarray, nearest: bool) -> None:
+        """Write hits into ``best``: per ray the nearest (``nearest``) or its only one."""
+        if nearest and rows.size:
+            order = np.lexsort((np.abs(g), rows))
+            first = order[np.concatenate([[True], rows[order][1:] != rows[order][:-1]])]
+            rows, tris, l1, l2, g = rows[first], tris[first], l1[first], l2[first], g[first]
+        best.found[rows] = True
+        best.piece[rows] = cand[tris]
+        best.theta[rows] = np.column_stack([l1, l2])
+        best.g[rows] = g
+        best.slot[rows] = self.slot[cand[tris]]
