@@ -21,7 +21,7 @@ from cgfem.case.model import SURFACES, Body, Case
 from cgfem.embedding.quadrature import Embedding, embed, grid_for
 from cgfem.contact.assembly import summary as contact_summary
 from cgfem.contact.build import DEFINITIONS as CONTACT_DEFINITIONS, build_pair
-from cgfem.contact.fit import fit_mesh, write_fit_json, write_fit_vtu
+from cgfem.contact.fit import FIT_NAME_SEPARATOR, fit_mesh, write_fit_json, write_fit_vtu
 from cgfem.contact.output import write_contact
 from cgfem.errors import InputError
 from cgfem.fem.body import BodyModel, boundary_of
@@ -259,17 +259,21 @@ def run_case(case: Case, level: int, surface: str, out: Path,
 
 def _write_fits(out: Path, system: System, record: StepRecord, number: int) -> dict:
     """``nurbs_fit``: the fitted surfaces of step ``number`` as ``fit_NNN.json`` (NURBS, the
-    moved control nets) and ``fit_NNN.vtu`` (sampled, with the FE displacement beside the
+    moved control nets, patches named ``body::patch``; ``fit_reference.json`` the same at
+    rest, written once) and ``fit_NNN.vtu`` (sampled, with the FE displacement beside the
     fitted one); per fitted patch its relative L2 distance to the FE displacement."""
     fits = system.contact.fits(record.unknowns)
     patches = [b.fit for b, _ in fits]
     moves = [V for _, V in fits]
-    write_fit_json(out / f"fit_{number:03d}.json", patches, moves)
+    bodies = [m.name for m in system.bodies]
+    names = [f"{bodies[b.body]}/{b.fit.name}" for b, _ in fits]
+    in_file = [n.replace("/", FIT_NAME_SEPARATOR, 1) for n in names]     # '/' is not allowed there
+    if number == 1:
+        write_fit_json(out / "fit_reference.json", patches, [np.zeros_like(V) for V in moves], in_file)
+    write_fit_json(out / f"fit_{number:03d}.json", patches, moves, in_file)
     write_fit_vtu(out / f"fit_{number:03d}.vtu", fit_mesh(patches, moves, [record.u[b.body] for b, _ in fits]))
-    names = [m.name for m in system.bodies]
-    return {f"{names[b.body]}/{b.fit.name}": {"control_points": b.fit.n_ctrl,
-                                               "relative_l2_error": b.fit.relative_l2_error(record.u[b.body], V)}
-            for b, V in fits}
+    return {name: {"control_points": b.fit.n_ctrl, "relative_l2_error": b.fit.relative_l2_error(record.u[b.body], V)}
+            for name, (b, V) in zip(names, fits)}
 
 
 def _write_step(out: Path, system: System, record: StepRecord, number: int,

@@ -52,6 +52,9 @@ DEFAULT_REFINE = "auto"
 AUTO_MIN_DEGREE = 2
 #: chords per knot span (and iso-lines per span of the other direction) measuring arc lengths
 ARC_SAMPLES = 8
+#: between the body's and the patch's name of a fitted patch in the result files
+#: NURBS JSON (``body::patch``; patch names may not contain '/')
+FIT_NAME_SEPARATOR = "::"
 #: rows of :attr:`SurfaceBasis.values`: R, R_s, R_t, R_ss, R_st, R_tt
 ORDERS = _k.ORDERS
 
@@ -475,14 +478,17 @@ def build_fits(solid: Solid, rule: SurfaceQuadrature, space: Space, patches: Seq
 
 
 # -- output ------------------------------------------------------------------------------
-def write_fit_json(path, fits: Sequence[PatchFit], displacements: Sequence[np.ndarray]) -> Path:
+def write_fit_json(path, fits: Sequence[PatchFit], displacements: Sequence[np.ndarray],
+                   names: Sequence[str] | None = None) -> Path:
     """Write the fitted surfaces (control points ``P + V``, weights, knots and degrees of
     every patch, :meth:`PatchFit.moved`) as a NURBS JSON file (:mod:`cgfem.geometry.io`
-    format, the patches' names kept), atomically. ``displacements``: V (n_ctrl, 3) per fit."""
+    format), atomically. ``displacements``: V (n_ctrl, 3) per fit; ``names``: the patches'
+    names in the file (default: the fits' patch names)."""
     if len(fits) != len(displacements):
         raise ValueError(f"{len(fits)} fits but {len(displacements)} displacement sets")
+    names = [f.name or "fit" for f in fits] if names is None else list(names)
     path = Path(path)
-    write_solid(Solid(tuple(Patch(f.name or "fit", f.moved(V)) for f, V in zip(fits, displacements))), path)
+    write_solid(Solid(tuple(Patch(n, f.moved(V)) for n, f, V in zip(names, fits, displacements))), path)
     return path
 
 

@@ -45,16 +45,58 @@ def surface_profile(run: Run, body: str, line: dict[str, float], along: str, com
     return s[order], u[order]
 
 
+def fitted_profile(rest, moved, line: dict[str, float], along: str, component: str,
+                   samples: int = 400) -> tuple[np.ndarray, np.ndarray]:
+    """The fitted NURBS displacement along the line (as :func:`surface_profile`): the patch at
+    ``rest`` and ``moved`` (same knots) is sampled on a ``samples``-square parameter lattice,
+    and on each lattice line of the second parameter the point whose reference position
+    meets the line is found by linear interpolation of the first coordinate ``line`` fixes
+    (the other within a lattice step). Returns the coordinate along the line (sorted) and the
+    fitted displacement ``component`` there, (m,) each."""
+    (u0, u1), (v0, v1) = rest.domain
+    a, b = np.linspace(u0, u1, samples), np.linspace(v0, v1, samples)
+    uv = np.stack(np.meshgrid(a, b, indexing="ij"), -1).reshape(-1, 2)
+    X = rest.evaluate(uv).reshape(samples, samples, 3)
+    U = (moved.evaluate(uv) - rest.evaluate(uv)).reshape(samples, samples, 3)
+    names = list(line)
+    first, others = names[0], names[1:]
+    c = AXES[first]
+    s_out, u_out = [], []
+    for grid_x, grid_u in ((X, U), (X.transpose(1, 0, 2), U.transpose(1, 0, 2))):
+        f = grid_x[:, :, c] - line[first]                         # along the first parameter
+        i, j = np.nonzero(f[:-1] * f[1:] <= 0.0)
+        w = np.where(f[i, j] != f[i + 1, j], f[i, j] / (f[i, j] - f[i + 1, j] + 1e-300), 0.0)[:, None]
+        x = (1 - w) * grid_x[i, j] + w * grid_x[i + 1, j]
+        u = (1 - w) * grid_u[i, j] + w * grid_u[i + 1, j]
+        step = np.abs(np.diff(grid_x, axis=0)).max()
+        keep = np.all([np.abs(x[:, AXES[o]] - line[o]) <= step for o in others], axis=0) if others else np.ones(len(x), bool)
+        s_out.append(x[keep, AXES[along]])
+        u_out.append(u[keep, AXES[component]])
+        if s_out[-1].size:
+            break
+    s, u = np.concatenate(s_out), np.concatenate(u_out)
+    order = np.argsort(s, kind="stable")
+    return s[order], u[order]
+
+
 def fig10_surface_profile(summaries, body: str, line: dict[str, float], along: str = "y",
                           component: str = "z", band_fraction: float = 0.25) -> Figure:
     """Displacement ``component`` along a line across a body's surface at the last step, one
-    line per run (the boundary points within ``band_fraction * h`` of the line)."""
+    line per run (the boundary points within ``band_fraction * h`` of the line); for
+    ``nurbs_fit`` runs also the fitted NURBS of the body's contact patch along the same line
+    (black, dashed)."""
     fig, axes = new_figure(1, 1, width=4.5, height=3.0)
     ax = axes[0, 0]
     for run in load_runs(summaries):
         band = band_fraction * float(run.body(body)["h"])
         s, u = surface_profile(run, body, line, along, component, band)
         ax.plot(s, u, linewidth=0.8, markersize=2.5, label=_label(run), **_style(run))
+        for name, (rest, moved) in run.fitted_surfaces().items():
+            if name.split("/")[0] == body:
+                fs, fu = fitted_profile(rest, moved, line, along, component)
+                if fs.size:
+                    ax.plot(fs, fu, color="k", linewidth=0.8, linestyle="--", zorder=5,
+                            label=f"{run.label}: fitted NURBS ({name.split('/')[1]})")
     where = ", ".join(f"{k} = {v:g}" for k, v in line.items())
     ax.set(title=f"{body}: u_{component} along {along} at {where}", xlabel=f"{along} (m)",
            ylabel=f"u_{component} (m)")

@@ -175,6 +175,20 @@ class Run:
         """The slave points of every pair of a step, at their current positions."""
         return self._vtu(CONTACT_VTU, step)
 
+    def fitted_surfaces(self, step: int = -1) -> dict[str, tuple]:
+        """``nurbs_fit``: per fitted patch ``"body/patch"`` its surface at rest and at a step
+        (two :class:`~cgfem.geometry.nurbs.NurbsSurface` with the same knots and weights);
+        empty for other definitions or runs without the files."""
+        from cgfem.contact.fit import FIT_NAME_SEPARATOR, read_fit_json
+
+        number = self.n_steps + 1 + step if step < 0 else step
+        rest, moved = self.folder / "fit_reference.json", self.folder / f"fit_{number:03d}.json"
+        if not (rest.is_file() and moved.is_file()):
+            return {}
+        at_rest = {p.name: p.surface for p in read_fit_json(rest)}
+        return {p.name.replace(FIT_NAME_SEPARATOR, "/", 1): (at_rest[p.name], p.surface)
+                for p in read_fit_json(moved) if p.name in at_rest}
+
 
 def load_runs(paths) -> list[Run]:
     """Runs from folders or ``summary.json`` paths, sorted by (case, surface, level)."""
