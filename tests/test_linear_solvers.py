@@ -237,6 +237,17 @@ def test_saddle_point(backend: str, cube) -> None:
         assert solver.info["mtype"] == 11
 
 
+def test_large_symmetric_saddle_point_is_refused(monkeypatch) -> None:
+    """Above SADDLE_MAX_DOFS a symmetric saddle point is refused (the run fails with the
+    reason) instead of a factorization that exhausts the memory."""
+    monkeypatch.setattr(linear, "SADDLE_MAX_DOFS", 10)
+    A = sp.bmat([[sp.identity(20), sp.identity(20)], [sp.identity(20), None]], format="csr")
+    with pytest.raises(LinearSolverError, match="saddle-point system of 40 unknowns"):
+        factorize(A, symmetric=True, indefinite=True)
+    x = factorize(A, symmetric=False, indefinite=True).solve(np.ones(40))
+    np.testing.assert_allclose(A @ x, np.ones(40), atol=1e-12)
+
+
 def test_bad_backend_name(cube) -> None:
     K, *_ = cube
     with pytest.raises(ValueError, match="'mumps'"):

@@ -49,6 +49,9 @@ import scipy.sparse.linalg as spla
 
 BACKENDS = ("superlu", "pyamg", "pardiso")
 PARDISO_MAX_DOFS = 100_000  #: largest symmetric system ``auto`` sends to pardiso
+#: largest symmetric saddle point factorized (pardiso's non-symmetric type: planar nurbs_fit
+#: at 69k unknowns peaked at 3.8 GB, at 470k it passed 23 GB and was killed)
+SADDLE_MAX_DOFS = 150_000
 SUPERLU_MAX_DOFS = 10_000  #: largest symmetric system ``auto`` sends to superlu (no pardiso)
 DIRECT_CHECK = 1e-8  #: relative residual a direct solve must reach
 MAX_ITERATIONS = 1000  #: bound on the Krylov iterations of one pyamg solve
@@ -304,6 +307,10 @@ def factorize(A: sp.spmatrix, *, backend: str = "auto", symmetric: bool = True,
         raise ValueError(f"A must be a square sparse matrix, got {type(A).__name__} "
                          f"of shape {getattr(A, 'shape', None)}")
     name = choose_backend(A.shape[0], symmetric, backend, indefinite)
+    if indefinite and symmetric and A.shape[0] > SADDLE_MAX_DOFS:
+        raise LinearSolverError(f"{name}: a symmetric saddle-point system of {A.shape[0]} unknowns "
+                                f"(above {SADDLE_MAX_DOFS}) would not fit in memory factorized, and "
+                                "pyamg cannot solve it")
     t0 = time.perf_counter()
     A = sp.csr_matrix(A, dtype=np.float64, copy=True)  # our own copy, sorted and summed
     A.sum_duplicates()
