@@ -298,15 +298,22 @@ class _AMG(LinearSolver):
 
 def factorize(A: sp.spmatrix, *, backend: str = "auto", symmetric: bool = True,
               near_null: np.ndarray | None = None, rtol: float = 1e-10,
-              indefinite: bool = False) -> LinearSolver:
+              indefinite: bool = False, saddle: tuple | None = None) -> LinearSolver:
     """Factorize (superlu, pardiso) or build the AMG hierarchy (pyamg) of the square matrix
     ``A``. ``near_null`` (e.g. :func:`rigid_body_modes`) and ``rtol`` (relative residual)
-    serve pyamg only; ``indefinite``: a saddle-point matrix (:func:`choose_backend`). Raises :class:`LinearSolverError` on a singular or non-finite matrix,
+    serve pyamg only; ``indefinite``: a saddle-point matrix (:func:`choose_backend`).
+    ``saddle``: ``(n_u, constraints)`` of nurbs_fit's saddle point
+    (:mod:`cgfem.solve.saddle`): with ``auto``, a symmetric one above
+    :data:`SADDLE_MAX_DOFS` is solved on the bodies' dofs by AMG-preconditioned CG. Raises :class:`LinearSolverError` on a singular or non-finite matrix,
     ``ValueError`` on a bad backend name or shape."""
     if not sp.issparse(A) or A.ndim != 2 or A.shape[0] != A.shape[1]:
         raise ValueError(f"A must be a square sparse matrix, got {type(A).__name__} "
                          f"of shape {getattr(A, 'shape', None)}")
     name = choose_backend(A.shape[0], symmetric, backend, indefinite)
+    if indefinite and symmetric and A.shape[0] > SADDLE_MAX_DOFS and saddle is not None and backend == "auto":
+        from cgfem.solve.saddle import reduced_saddle
+        return reduced_saddle(sp.csr_matrix(A, dtype=np.float64), saddle[0], saddle[1], symmetric, near_null,
+                              max(rtol, 1e-10))
     if indefinite and symmetric and A.shape[0] > SADDLE_MAX_DOFS:
         raise LinearSolverError(f"{name}: a symmetric saddle-point system of {A.shape[0]} unknowns "
                                 f"(above {SADDLE_MAX_DOFS}) would not fit in memory factorized, and "

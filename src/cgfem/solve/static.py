@@ -26,6 +26,7 @@ from cgfem.case.model import SolverOptions
 from cgfem.contact.assembly import ContactSet, active_changes
 from cgfem.fem.body import BodyModel
 from cgfem.solve.linear import choose_backend, factorize, rigid_body_modes
+from cgfem.solve.saddle import FitConstraint
 from cgfem.solve.newton import newton
 
 
@@ -209,6 +210,16 @@ class System:
             total += float(np.dot(f, f))
         return float(np.sqrt(total))
 
+    def saddle(self) -> tuple[int, list[FitConstraint]] | None:
+        """nurbs_fit's saddle point for the linear solver (:mod:`cgfem.solve.saddle`): the
+        bodies' dof count and one block per fitted patch; None without fitted patches."""
+        blocks = self.contact.blocks
+        if not blocks:
+            return None
+        return int(self.offsets[-1]), [
+            FitConstraint(b.z, b.mu, self.offsets[b.body] + np.arange(self.bodies[b.body].n_dofs), b.fit.M, b.fit.G,
+                          b.fit.factor.solve, b.scale) for b in blocks]
+
     def near_null(self) -> np.ndarray:
         """Rigid-body modes of every body, block by block (n_dofs, 6 n_bodies); zero on the
         contact set's own unknowns."""
@@ -222,16 +233,17 @@ class _Solver:
     while ``frozen`` (modified Newton: the last factorization serves for a new matrix).
     Failures raise :class:`~cgfem.solve.linear.LinearSolverError`, which Newton reports."""
 
-    def __init__(self, backend: str, near_null: np.ndarray, symmetric: bool = True, indefinite: bool = False):
+    def __init__(self, backend: str, near_null: np.ndarray, symmetric: bool = True, indefinite: bool = False,
+                 saddle: tuple | None = None):
         self.backend, self.near_null, self.symmetric = backend, near_null, symmetric
-        self.indefinite = indefinite
+        self.indefinite, self.saddle = indefinite, saddle
         self._key, self._factor = None, None
         self.frozen = False
 
     def __call__(self, K: sp.csr_matrix, b: np.ndarray) -> np.ndarray:
         if self._key is not K and not (self.frozen and self._factor is not None):
             self._factor = factorize(K, backend=self.backend, symmetric=self.symmetric,
-                                     near_null=self.near_null, indefinite=self.indefinite)
+                                     near_null=self.near_null, indefinite=self.indefinite, saddle=self.saddle)
             self._key = K
         return self._factor.solve(b)
 
@@ -298,7 +310,7 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
     log = log or (lambda message: None)
     # ValueError if unusable
     choose_backend(system.n_dofs, system.symmetric, options.linear, system.indefinite)
-    solver = _Solver(options.linear, system.near_null(), system.symmetric, system.indefinite)
+    solver = _Solver(options.linear, system.near_null(), system.symmetric, system.indefinite, system.saddle())
     u = np.zeros(system.n_dofs)
     recovered: list[np.ndarray | None] = [None] * len(system.bodies)
     t, records = 0.0, []

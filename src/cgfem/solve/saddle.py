@@ -1,0 +1,158 @@
+"""Iterative solution of ``nurbs_fit``'s saddle-point systems on the bodies' dofs alone.
+
+The Newton system of :mod:`cgfem.contact.fitted` has three kinds of unknowns: the bodies'
+dofs ``u``, and per fitted patch its control displacements ``Z`` and multipliers ``mu``::
+
+    [ K     0     -s G^T ] [u ]   [b_u ]
+    [ 0     Kc     s M   ] [Z ] = [b_Z ]
+    [ -s G  s M    0     ] [mu]   [b_mu]
+
+(``Kc`` the contact tangent, which only couples ``Z``). Its factorization costs far more
+than the bodies' own matrix would (the non-symmetric type, pyamg cannot take it at all).
+``M`` is a small banded SPD matrix factorized once per patch, so ``Z`` and ``mu`` are
+eliminated exactly for a given ``u``::
+
+    Z  = M^-1 (b_mu / s + G u),     mu = M^-1 (b_Z - Kc Z) / s,
+    S u = K u + C^T Kc C u = b_u + G^T M^-1 b_Z - C^T Kc M^-1 b_mu / s,    C = M^-1 G,
+
+and the reduced operator ``S`` (dense over a contact surface if formed: it never is) is
+applied matrix-free in a Krylov solver (CG when the system is symmetric, else GMRES)
+preconditioned by smoothed-aggregation AMG of the sparse ``K + C~^T Kc C~``, with ``C~`` the
+fit with a lumped ``M`` (row sums; non-negative B-spline bases make them positive), which is
+spectrally close to ``C``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from cgfem.solve.linear import LinearSolver, LinearSolverError
+
+
+@dataclass(frozen=True)
+class FitConstraint:
+    """One fitted patch's block of the saddle point: ``z``, ``mu`` (3 m,) global indices of
+    its control displacements and multipliers, ``cols`` (3 n_nodes,) those of its body's
+    dofs (node-major), ``M`` (m, m), ``G`` (m, n_nodes), ``solve_M`` (``M^-1``, per
+    column of an (m, k) array), ``scale`` ``s``."""
+
+    z: np.ndarray
+    mu: np.ndarray
+    cols: np.ndarray
+    M: sp.csr_matrix
+    G: sp.csr_matrix
+    solve_M: object
+    scale: float
+
+
+class ReducedSaddleSolver(LinearSolver):
+    """The saddle-point system solved on ``u`` (module docstring); ``n_u`` the bodies' dofs
+    (the first unknowns), ``constraints`` one :class:`FitConstraint` per fitted patch."""
+
+    backend = "saddle-amg"
+
+    def __init__(self, A: sp.csr_matrix, n_u: int, constraints: list[FitConstraint], symmetric: bool,
+                 near_null: np.ndarray | None, rtol: float = 1e-10, max_iterations: int = 1000) -> None:
+        import pyamg
+
+        super().__init__(A.shape[0])
+        A = sp.csr_matrix(A)
+        self.n_u, self.constraints, self.symmetric = n_u, constraints, symmetric
+        self.rtol, self.max_iterations = rtol, max_iterations
+        self.K = A[:n_u][:, :n_u].tocsr()
+        z = np.concatenate([c.z for c in constraints])
+        self._z = z
+        self.Kc = A[z][:, z].tocsr()                     # contact tangent on all fitted Z
+        self._offsets = np.concatenate([[0], np.cumsum([c.z.size for c in constraints])])
+        # the preconditioner's matrix: K + C~^T Kc C~ with the lumped fit C~ = D^-1 G
+        Ct = sp.vstack([self._lumped(c) for c in constraints]).tocsr()          # (|z|, n_u)
+        P = (self.K + Ct.T @ self.Kc @ Ct).tocsr()
+        if symmetric:
+            P = (0.5 * (P + P.T)).tocsr()
+        d = np.abs(P.diagonal())
+        if np.any(d == 0.0):
+            raise LinearSolverError("saddle-amg: zero diagonal entries in the reduced matrix")
+        self._s = 1.0 / np.sqrt(d)
+        Ps = sp.diags(self._s) @ P @ sp.diags(self._s)
+        B = None if near_null is None else near_null[:n_u] / self._s[:, None]
+        self._ml = pyamg.smoothed_aggregation_solver(Ps.tocsr(), B=B, symmetry="hermitian" if symmetric else "nonsymmetric")
+
+    def _lumped(self, c: FitConstraint) -> sp.csr_matrix:
+        """``D^-1 G`` per component on the global body columns: (3 m, n_u)."""
+        D = np.asarray(c.M.sum(axis=1)).ravel()
+        Gl = sp.diags(1.0 / D) @ c.G
+        G3 = sp.kron(Gl, sp.identity(3), format="coo")
+        return sp.csr_matrix((G3.data, (G3.row, c.cols[G3.col])), shape=(c.z.size, self.n_u))
+
+    # -- the fit operators on all blocks ---------------------------------------------------
+    def _C(self, u: np.ndarray) -> np.ndarray:
+        """``M^-1 G u`` of every block, stacked like ``Z`` (|z|,)."""
+        return np.concatenate([c.solve_M(c.G @ u[c.cols].reshape(-1, 3)).ravel() for c in self.constraints])
+
+    def _Ct(self, y: np.ndarray) -> np.ndarray:
+        """``G^T M^-1 y`` of every block summed on the bodies' dofs (n_u,)."""
+        out = np.zeros(self.n_u)
+        for c, a, b in zip(self.constraints, self._offsets[:-1], self._offsets[1:]):
+            out[c.cols] += (c.G.T @ c.solve_M(y[a:b].reshape(-1, 3))).ravel()
+        return out
+
+    def _Minv(self, y: np.ndarray) -> np.ndarray:
+        return np.concatenate([c.solve_M(y[a:b].reshape(-1, 3)).ravel()
+                               for c, a, b in zip(self.constraints, self._offsets[:-1], self._offsets[1:])])
+
+    def _scales(self) -> np.ndarray:
+        return np.concatenate([np.full(c.z.size, c.scale) for c in self.constraints])
+
+    def _solve(self, b: np.ndarray, norm_b: float) -> tuple[np.ndarray, int, float]:
+        n_u, z = self.n_u, self._z
+        mu = np.concatenate([c.mu for c in self.constraints])
+        s = self._scales()
+        b_u, b_Z, b_mu = b[:n_u], b[z], b[mu]
+        w = self._Minv(b_mu / s)                                    # M^-1 b_mu / s
+        rhs = b_u + self._Ct(b_Z) - self._Ct(self.Kc @ w)
+        S = spla.LinearOperator((n_u, n_u), matvec=lambda v: self.K @ v + self._Ct(self.Kc @ self._C(v)))
+        scale = self._s
+
+        def precondition(r):
+            return scale * self._ml.solve(scale * r, tol=1e-8, maxiter=1, cycle="V")
+        Pinv = spla.LinearOperator((n_u, n_u), matvec=precondition)
+        count = [0]
+
+        def callback(*_):
+            count[0] += 1
+        norm_rhs = float(np.linalg.norm(rhs))
+        if norm_rhs == 0.0:
+            u = np.zeros(n_u)
+        elif self.symmetric:
+            u, info = spla.cg(S, rhs, rtol=self.rtol, atol=0.0, maxiter=self.max_iterations, M=Pinv,
+                              callback=callback)
+        else:
+            u, info = spla.gmres(S, rhs, rtol=self.rtol, atol=0.0, restart=50, maxiter=self.max_iterations,
+                                 M=Pinv, callback=callback, callback_type="pr_norm")
+        Z = w + self._C(u)
+        mu_x = self._Minv(b_Z - self.Kc @ Z) / s
+        x = np.zeros(self.n)
+        x[:n_u], x[z], x[mu] = u, Z, mu_x
+        residual = float(np.linalg.norm(b - self._matvec(x))) / norm_b if norm_b > 0.0 else 0.0
+        if not np.isfinite(residual) or residual > max(10.0 * self.rtol, 1e-8):
+            raise LinearSolverError(f"saddle-amg: reached relative residual {residual:.2e} in {count[0]} "
+                                    f"Krylov iterations")
+        return x, count[0], residual
+
+    def bind(self, A: sp.csr_matrix) -> "ReducedSaddleSolver":
+        self._matvec = A.dot
+        return self
+
+
+def reduced_saddle(A: sp.csr_matrix, n_u: int, constraints: list[FitConstraint], symmetric: bool,
+                   near_null: np.ndarray | None = None, rtol: float = 1e-10) -> ReducedSaddleSolver:
+    """Set up :class:`ReducedSaddleSolver` for ``A`` (timed like the other backends)."""
+    t0 = time.perf_counter()
+    solver = ReducedSaddleSolver(A, n_u, constraints, symmetric, near_null, rtol).bind(sp.csr_matrix(A))
+    solver.info.update(backend=solver.backend, symmetric=symmetric, setup_s=time.perf_counter() - t0)
+    return solver
