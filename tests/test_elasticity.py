@@ -210,10 +210,13 @@ def test_cut_back_reaches_the_step_in_equal_sub_steps(monkeypatch):
     from cgfem.case.model import SolverOptions
 
     class OneDof:
-        n_dofs, symmetric, bodies = 1, True, [None]
+        n_dofs, symmetric, indefinite, bodies = 1, True, False, [None]
 
         def split(self, u):
             return [u]
+
+        def saddle(self):
+            return None
 
         def near_null(self):
             return np.ones((1, 1))
