@@ -51,14 +51,14 @@ def test_smoke_plan_has_every_rule_once_per_job(workdir):
     n_planar = len(config["examples"]["planar"]["levels"]) * len(config["surfaces"])
     assert jobs == {"all": 1, "check_case": 4, "run_case": expected_runs(config), "planar_reference": 1,
                     "planar_errors": n_planar, "claims": 1, **{f: 1 for f in FIGURES}}
-    assert expected_runs(config) == 10                  # 5 example levels x (facets, nurbs_fe)
+    assert expected_runs(config) == 15                  # 5 example levels x 3 definitions
 
 
 def test_full_plan_runs_every_example_level_and_definition(workdir):
     config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
     jobs = planned_jobs(workdir)
-    assert jobs["run_case"] == expected_runs(config) == 24     # 12 example levels x 2
-    assert jobs["planar_errors"] == 8
+    assert jobs["run_case"] == expected_runs(config) == 36     # 12 example levels x 3
+    assert jobs["planar_errors"] == 12
 
 
 def planned_runs(root: Path, *args: str, target: str | None = None) -> set[str]:
@@ -70,26 +70,26 @@ def planned_runs(root: Path, *args: str, target: str | None = None) -> set[str]:
 
 
 @pytest.mark.parametrize("configfile", [None, "config/smoke.yaml"])
-def test_only_implemented_definitions_are_planned(workdir, configfile):
-    """nurbs_fit refuses cases with contact (exit 2) until it is implemented: no job asks for
-    it, and fig10 compares facets with nurbs_fe meanwhile."""
+def test_every_definition_is_planned(workdir, configfile):
+    """The three surface definitions at every level of every example; fig10 compares facets
+    with nurbs_fit as the paper does."""
     args = ("--configfile", configfile) if configfile else ()
     runs = planned_runs(workdir, *args)
-    assert {re.search(r"/L\d+_(\w+)$", path)[1] for path in runs} == {"facets", "nurbs_fe"}
+    assert {re.search(r"/L\d+_(\w+)$", path)[1] for path in runs} == {"facets", "nurbs_fe", "nurbs_fit"}
     config = yaml.safe_load((REPO / (configfile or "config/config.yaml")).read_text())
     assert len(runs) == expected_runs(config)
     level = config["figures"]["fig10"]["level"]
     fig10 = planned_runs(workdir, *args, target="paper_figures/fig10.png")
-    assert fig10 == {f"results/runs/planar/L{level}_facets", f"results/runs/planar/L{level}_nurbs_fe"}
+    assert fig10 == {f"results/runs/planar/L{level}_facets", f"results/runs/planar/L{level}_nurbs_fit"}
 
 
-def test_nurbs_fit_stays_allowed_by_the_schema(workdir, tmp_path):
-    """Planning nurbs_fit again is one line of the config: fig10 then compares it with facets."""
-    extra = tmp_path / "fit.yaml"
-    extra.write_text("surfaces: [facets, nurbs_fe, nurbs_fit]\n")
+def test_fig10_falls_back_to_nurbs_fe(workdir, tmp_path):
+    """Without nurbs_fit among the surfaces, fig10 compares facets with nurbs_fe."""
+    extra = tmp_path / "two.yaml"
+    extra.write_text("surfaces: [facets, nurbs_fe]\n")
     level = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["figures"]["fig10"]["level"]
     fig10 = planned_runs(workdir, "--configfile", str(extra), target="paper_figures/fig10.png")
-    assert fig10 == {f"results/runs/planar/L{level}_facets", f"results/runs/planar/L{level}_nurbs_fit"}
+    assert fig10 == {f"results/runs/planar/L{level}_facets", f"results/runs/planar/L{level}_nurbs_fe"}
 
 
 def test_lint_is_clean(workdir):

@@ -50,8 +50,8 @@ def planar_error_tables():
 
 
 def fig10_surfaces():
-    """fig10 compares facets with nurbs_fit (the paper's Fig. 10); nurbs_fe stands in while
-    nurbs_fit is not among the configured surfaces (it is not implemented yet)."""
+    """fig10 compares facets with nurbs_fit (the paper's Fig. 10); nurbs_fe stands in when
+    nurbs_fit is not among the configured surfaces."""
     return ["facets", "nurbs_fit" if "nurbs_fit" in SURFACES else "nurbs_fe"]
 
 

@@ -21,7 +21,7 @@ rule fig09:
 
 rule fig10:
     """Fig. 10: u_z along a line across the top surface of the lower block, facets against
-    nurbs_fit (nurbs_fe until nurbs_fit is run)."""
+    nurbs_fit (nurbs_fe if nurbs_fit is not configured), with the fitted NURBS curve."""
     input:
         summaries("planar", surfaces=fig10_surfaces(), levels=[config["figures"]["fig10"]["level"]]),
     output:
