@@ -413,6 +413,19 @@ def test_outer_not_converged_is_neither_converged_nor_failed(tmp_path):
     assert not claim.reproduced and "nurbs_fe outer_not_converged" in claim.numbers
 
 
+def test_claim_4_needs_facets_to_carry_the_load(tmp_path):
+    """A facets run whose links never touch has a tiny von Mises stress: not a comparison."""
+    chain3 = [make_run(tmp_path, "chain3", 0, s, bodies=("link_a", "link_c", "link_b"), von_mises=v)
+              for s, v in (("facets", 1e-2), ("nurbs_fe", 3e8))]
+    summary = Path(chain3[0])
+    data = json.loads(summary.read_text())
+    for step in data["steps"]:
+        step["contact"]["force"] = [0.0, 1e-9, 0.0]
+    summary.write_text(json.dumps(data))
+    claim = claim_lower_von_mises(load_runs(chain3), 0, "link_c")
+    assert not claim.reproduced and "facets carries no load" in claim.numbers and "never touch" in claim.numbers
+
+
 def test_contact_points_are_drawn_where_the_file_puts_them(tmp_path):
     """contact_NNN.vtu holds the slave points at their current positions: fig15 draws the
     active ones as stored, not warped again by the boundary cloud's displacement."""
