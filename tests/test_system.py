@@ -132,3 +132,31 @@ def test_free_rigid_modes_of_a_body(components, free):
     body = build_models(case, 0, "nurbs_fe", lambda message: None)[0][0]
     _, K = body.assemble(np.zeros(body.n_dofs), 1.0, None, True)
     assert System([body]).free_rigid_modes(0, sp.csr_matrix(K)) == free
+
+
+def test_fading_shift_restores_fast_convergence_on_a_soft_mode():
+    """A soft mode of stiffness k under a tangent shift s converges at the rate s / (k + s)
+    per Newton iteration: with s = 10 k (chain3's middle link at level 2 had k / s ~ 0.09)
+    a fixed shift needs over 250 iterations to 1e-12; the shift scaled by shift_factor fades
+    with the residual and gets there in 18 (the floor SHIFT_FLOOR sets the final rate, 1e-3)."""
+    from cgfem.solve.newton import newton
+    from cgfem.solve.static import SHIFT_FLOOR, shift_factor
+    assert shift_factor(5.0, 5.0) == 1.0 and shift_factor(1.0, 0.0) == 1.0
+    assert shift_factor(1e-3, 1.0) == pytest.approx(1e-3) and shift_factor(1e-9, 1.0) == SHIFT_FLOOR
+    k, s, f = 1.0, 10.0, 1.0
+
+    def solve(fading):
+        largest = [0.0]
+
+        def assemble(u, tangent):
+            r = np.array([k * u[0] - f])
+            norm = float(np.abs(r[0]))
+            largest[0] = max(largest[0], norm)
+            factor = shift_factor(norm, largest[0]) if fading else 1.0
+            return r, np.array([[k + factor * s]])
+        return newton(assemble, np.zeros(1), lambda K, b: np.linalg.solve(K, b), tol=1e-12, reference=1.0,
+                      max_iter=400)
+    fixed, fading = solve(False), solve(True)
+    assert fixed.converged and len(fixed.residuals) - 1 > 250
+    assert fading.converged and len(fading.residuals) - 1 < 25           # 18 measured
+    np.testing.assert_allclose(fading.u, [f / k], rtol=1e-12)

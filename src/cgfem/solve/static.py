@@ -100,6 +100,8 @@ class System:
         self.floating: list[int] | None = None if self.contact else []
         self._K: sp.csr_matrix | None = None
         self._shift: sp.csr_matrix | None = None
+        #: load factor and largest residual norm of the increment (:meth:`_shift_factor`)
+        self._largest: tuple[float, float] | None = None
 
     @property
     def linear(self) -> bool:
@@ -149,8 +151,18 @@ class System:
                 self.floating = [i for i, p in enumerate(parts) if self.free_rigid_modes(i, p[1])]
             K = K + Kc.tocsr()
             if self.floating:
-                K = K + self._floating_shift(K)
+                K = K + self._shift_factor(t, float(np.linalg.norm(r))) * self._floating_shift(K)
         return r, K
+
+    def _shift_factor(self, t: float, norm: float) -> float:
+        """The fraction of the floating bodies' tangent shift used at a linearization point
+        with residual norm ``norm`` at load factor ``t``: ``norm`` over the largest residual
+        norm seen at ``t`` (the increment's start), kept in ``[SHIFT_FLOOR, 1]``
+        (:func:`shift_factor`)."""
+        if self._largest is None or self._largest[0] != t:
+            self._largest = (t, norm)
+        self._largest = (t, max(self._largest[1], norm))
+        return shift_factor(norm, self._largest[1])
 
     def step_limit(self, du: np.ndarray) -> float:
         """Factor (0, 1] that keeps every nodal move of a body held by contact alone within
@@ -181,10 +193,14 @@ class System:
     def _floating_shift(self, K: sp.csr_matrix) -> sp.csr_matrix:
         """Tangent-only stabilization of bodies held by contact alone in some rigid motion
         (:meth:`free_rigid_modes`): ``FLOATING_SHIFT``
-        times the diagonal of their first tangent is added to the matrix Newton solves, never
-        to the residual. It makes the rigid motions of such a body solvable before contact
-        forces hold it (and a frictionless spinning mode always), and leaves the converged
-        solution exactly that of the unstabilized equations: no stabilizing force remains."""
+        times the diagonal of their first tangent, scaled by :meth:`_shift_factor`, is added
+        to the matrix Newton solves, never to the residual. It makes the rigid motions of such
+        a body solvable before contact forces hold it (and a frictionless spinning mode
+        always), and leaves the converged solution exactly that of the unstabilized equations:
+        no stabilizing force remains. The scaling (Levenberg-Marquardt-like) lets the shift
+        fade as Newton converges: a soft rigid mode of stiffness ``k`` is corrected at the rate
+        ``shift / (k + shift)`` per iteration, 0.92 with the full shift on chain3's middle link
+        at level 2 (a torus held at two points), which stalled Newton at 1e-8."""
         if self._shift is None:
             d = np.zeros(self.n_dofs)
             diag = K.diagonal()
@@ -289,14 +305,23 @@ Log = Callable[[str], None]
 
 #: iterations allowed to modified Newton (frozen tangent) in outer passes after the first
 MODIFIED_NEWTON_ITERATIONS = 6
+#: the floating bodies' tangent shift fades with the residual down to this fraction of it
+SHIFT_FLOOR = 1e-4
 #: diagonal shift of the tangent of bodies held by contact only (:meth:`System._floating_shift`)
 FLOATING_SHIFT = 1e-8
 #: a rigid motion whose stiffness is below this fraction of the mean diagonal is free
 FREE_MODE = 1e-10
 #: largest nodal move, in element sizes, of a body held by contact alone in one Newton step
-FLOATING_STEP = 0.25
+FLOATING_STEP = 1.0
 #: relax the outer loop's fixed point (:class:`Relaxation`); False: plain substitution
 ACCELERATE = True
+
+
+def shift_factor(norm: float, largest: float) -> float:
+    """``norm / largest`` kept in ``[SHIFT_FLOOR, 1]`` (1 if ``largest`` is not positive)."""
+    if not largest > 0.0:
+        return 1.0
+    return float(min(1.0, max(norm / largest, SHIFT_FLOOR)))
 
 
 def solve_static(system: System, steps: int, options: SolverOptions, log: Log | None = None,
