@@ -41,3 +41,9 @@ def test_contact_force_balances_the_tractions(tmp_path, surface, level):
     # about 4e7 Pa along the interface (the reference solution: 2.8e7 to 4.5e7 Pa); facets
     # peak at their chamfered edges
     assert 1e7 < step["contact"]["max_pressure"] < (2e8 if surface == "nurbs_fe" else 1e9)
+    # the residual with every hit on the continuous surface: Newton's own last one unless an
+    # active hit lies on a kept element's extension (facets: never counted)
+    last = step["pass_residuals"][-1][-1] / step["newton_reference"]
+    assert step["contact"]["continuous_residual"] <= case.solver.newton_tol
+    if step["contact"]["extended_hits"] == 0:
+        assert step["contact"]["continuous_residual"] == pytest.approx(last, rel=1e-3, abs=1e-11)

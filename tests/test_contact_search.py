@@ -155,6 +155,30 @@ def test_a_hit_keeps_its_master_element_across_a_face(scene):
     np.testing.assert_array_equal(fresh.slot[f], surface.space.locate(Xf)[0])
 
 
+def test_polished_hits_are_on_the_continuous_surface(scene):
+    """With ``polish`` the hits that the previous pairing kept on an element's extension are
+    moved onto the element holding them: every hit then equals the fresh search's (no
+    previous pairing) point by point, elements included, and lies on its ray."""
+    surface, x1, n1, u = scene
+    first = surface.search(0.7 * u, x1, n1, MAX_GAP)
+    kept = surface.search(u, x1, n1, MAX_GAP, first)
+    fresh = surface.search(u, x1, n1, MAX_GAP)
+    surface.polish = True
+    try:
+        polished = surface.search(u, x1, n1, MAX_GAP, first)
+    finally:
+        surface.polish = False
+    both = kept.found & fresh.found
+    assert np.sum(both & (kept.slot != fresh.slot)) >= 1      # the scene keeps some element
+    np.testing.assert_array_equal(polished.found, fresh.found)
+    f = np.flatnonzero(fresh.found)
+    np.testing.assert_array_equal(polished.slot[f], fresh.slot[f])
+    np.testing.assert_allclose(polished.g[f], fresh.g[f], rtol=0.0, atol=1e-10 * surface.h)   # the ray tolerance
+    mp = surface.evaluate(u, polished.piece[f], polished.theta[f], second=False)
+    np.testing.assert_array_equal(mp.slot, polished.slot[f])
+    np.testing.assert_allclose(mp.x, x1[f] + polished.g[f, None] * n1[f], rtol=0.0, atol=1e-11)
+
+
 def test_prefilter_keeps_every_ray_through_the_master(scene):
     """The box prefilter drops slave rays (not vacuous), but never one whose segment passes
     through a master point: rays through the seeds in random directions are all kept."""
@@ -237,7 +261,7 @@ def test_newton_wraps_across_a_seam(scene):
         n1 = -mp.normal[0]                            # from outside, against the outward normal
         x1 = mp.x[0] - 0.01 * n1
         for start in (u0 + 2e-3 * (u1 - u0), u1 - 5e-3 * (u1 - u0)):
-            r = rk.ray_newton(x1, n1, 0, start, v, MAX_GAP, RAY_TOL, MAX_RAY_NEWTON, *args, -1, out)
+            r = rk.ray_newton(x1, n1, 0, start, v, 0.0, MAX_GAP, RAY_TOL, MAX_RAY_NEWTON, *args, -1, out)
             assert r == 1
             np.testing.assert_allclose(out[:2], target, atol=1e-10)
             np.testing.assert_allclose(out[2], 0.01, atol=1e-12)

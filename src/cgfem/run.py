@@ -288,6 +288,11 @@ def _write_step(out: Path, system: System, record: StepRecord, number: int,
         contact = contact_summary(points, [p.name for p in system.contact.pairs])
         if system.contact.blocks:
             contact["fits"] = _write_fits(out, system, record, number)
+        # NURBS+FE: the residual over Newton's reference with every master hit on the
+        # continuous surface (Newton's own last residual where no active hit lies on a kept
+        # element's extension past a grid face, extended_hits = 0)
+        contact["extended_hits"] = record.extended_hits
+        contact["continuous_residual"] = record.continuous_residual
     outputs = [step_outputs(m, u, s) for m, u, s in zip(models, record.u, record.recovered)]
     write_step(out, number, outputs)
     reactions = {}
@@ -295,6 +300,7 @@ def _write_step(out: Path, system: System, record: StepRecord, number: int,
         reactions.update({k: v.tolist() for k, v in m.reactions(u, record.load_factor, s).items()})
     names = [m.name for m in models]
     entry = {"load_factor": record.load_factor, "newton_residuals": record.newton_residuals[0],
+             "newton_reference": record.reference,
              "pass_residuals": record.newton_residuals,
              "outer_passes": record.outer_passes, "outer_changes": record.outer_changes,
              "outer_converged": record.outer_converged,

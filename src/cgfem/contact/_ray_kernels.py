@@ -31,9 +31,11 @@ from cgfem.geometry._nurbs_kernels import surface_derivs
 
 #: ``trace`` status of a point: a Newton iterate's ``Q`` lay in no active element
 OUTSIDE = 1
-#: a hit keeps its master element while its local coordinates stay within 1 + STICKY of it
-#: (the NURBS+FE master surface is only C0 across element faces: without this a Newton step
-#: of 1e-8 h can carry a loaded hit across the kink and back)
+#: the ray Newton keeps the previous pairing's master element while ``Q`` stays within
+#: 1 + STICKY of it in local coordinates (the NURBS+FE master surface is only C0 across element
+#: faces: without this an iterate of 1e-8 h can carry the hit across the kink and back); a hit
+#: that converged outside it is then polished onto the element holding it (:func:`trace`), so
+#: the surface hit is always the continuous one
 STICKY = 2e-3
 
 
@@ -159,12 +161,16 @@ def wrap(a, lo, hi):
 
 @njit(cache=True, parallel=True)
 def trace(x1, n1, start_piece, start_theta, start_slot, max_gap, ray_tol, max_iter, layout, knots, control,
-          origin, h, shape, elements, tol, connectivity, u, found, piece, theta, g, slot, status):
+          origin, h, shape, elements, tol, connectivity, u, found, piece, theta, g, slot, status, polish):
     """Per point ``p`` of ``x1``, ``n1`` (n, 3): :func:`ray_newton` from each start in turn;
     the first admissible hit (``|g| <= max_gap`` too) is written to ``found`` (n,) bool,
     ``piece`` (n,), ``theta`` (n, 2), ``g`` (n,), ``slot`` (n,) master element (others left as
     they are); ``start_slot`` (n, c) the preferred element of each start (-1: none). ``status`` (n,)
-    gets :data:`OUTSIDE` where an iterate left the active elements, else 0."""
+    gets :data:`OUTSIDE` where an iterate left the active elements, else 0. A hit converged
+    in a preferred element is polished without it (:data:`STICKY`): the hit is on the
+    continuous surface, in the element holding it, unless that polishing fails to converge
+    (the two elements' Newton steps point across the face at each other), when the
+    preferred element's hit is kept."""
     for p in prange(x1.shape[0]):
         out = np.empty(4)
         status[p] = 0
@@ -172,9 +178,20 @@ def trace(x1, n1, start_piece, start_theta, start_slot, max_gap, ray_tol, max_it
             k = start_piece[p, c]
             if k < 0:
                 break
-            r = ray_newton(x1[p], n1[p], k, start_theta[p, c, 0], start_theta[p, c, 1], max_gap, ray_tol,
+            r = ray_newton(x1[p], n1[p], k, start_theta[p, c, 0], start_theta[p, c, 1], 0.0, max_gap, ray_tol,
                            max_iter, layout, knots, control, origin, h, shape, elements, tol, connectivity,
                            u, start_slot[p, c], out)
+            if polish and r == 1 and start_slot[p, c] >= 0:
+                # converged in the kept element, perhaps on its extension past a face: the
+                # same Newton in the elements holding the iterates (one evaluation if the hit
+                # is inside the kept element; a few iterations if it is across the face)
+                polished = np.empty(4)
+                r2 = ray_newton(x1[p], n1[p], k, out[0], out[1], out[2], max_gap, ray_tol, max_iter, layout,
+                                knots, control, origin, h, shape, elements, tol, connectivity, u, -1,
+                                polished)
+                if r2 == 1:
+                    for i in range(4):
+                        out[i] = polished[i]
             if r < 0:
                 status[p] = -1 - r
                 break
@@ -187,9 +204,9 @@ def trace(x1, n1, start_piece, start_theta, start_slot, max_gap, ray_tol, max_it
 
 
 @njit(cache=True)
-def ray_newton(x1, n1, k, u0, v0, max_gap, ray_tol, max_iter, layout, knots, control, origin, h, shape,
+def ray_newton(x1, n1, k, u0, v0, g0, max_gap, ray_tol, max_iter, layout, knots, control, origin, h, shape,
                elements, tol, connectivity, u, prefer, out):
-    """Newton on ``x2(theta) - x1 - g n1 = 0`` from ``(u0, v0)`` on patch ``k``, ``g = 0``;
+    """Newton on ``x2(theta) - x1 - g n1 = 0`` from ``(u0, v0)`` on patch ``k``, ``g = g0``;
     a step leaving the patch's domain wraps around along a closed direction (``layout[k, 6:8]``)
     and is clipped onto the domain along an open one, and a clipped step that does not
     move is a stuck one. Stops converged (``|F| <= ray_tol h``), on a singular ``J``, a
@@ -208,7 +225,7 @@ def ray_newton(x1, n1, k, u0, v0, max_gap, ray_tol, max_iter, layout, knots, con
     F = np.empty(3)
     J = np.empty((3, 3))
     step = np.empty(3)
-    th0, th1, g = u0, v0, 0.0
+    th0, th1, g = u0, v0, g0
     for _ in range(max_iter):
         # evaluated at theta clipped to the domain, as evaluate() does (iterates are inside
         # it; a start is taken as given)

@@ -19,6 +19,7 @@ import scipy.sparse as sp
 
 from cgfem.contact.fitted import FitBlock, FittedSurface
 from cgfem.contact.pair import ContactPair, ContactPoints
+from cgfem.contact.surfaces import NurbsFeSurface
 
 
 class ContactSet:
@@ -125,6 +126,31 @@ class ContactSet:
         if not rows:
             return sp.coo_matrix((n, n))
         return sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+
+    def continuous(self, u: np.ndarray, r: np.ndarray) -> int:
+        """Add to ``r`` (n,) in place the contact residual (and the fit constraints'
+        equations) at ``u`` with every NURBS+FE hit on the continuous surface, in the element
+        holding it, not on the extension of the element its pairing kept
+        (:data:`~cgfem.contact._ray_kernels.STICKY`); the recorded pairing is left as it is.
+        Returns how many active hits lay on such an extension."""
+        kept = [p.state.hits for p in self.pairs]
+        extended = 0
+        try:
+            for k, p in enumerate(self.pairs):
+                if isinstance(p.surface, NurbsFeSurface) and p.state.hits is not None:
+                    p.surface.polish = True
+                    try:
+                        hits = p.search(*self._split(u, k))[1]
+                    finally:
+                        p.surface.polish = False
+                    if p.state.active is not None:
+                        extended += int(np.sum(p.state.active & (hits.slot != kept[k].slot)))
+                    p.state.hits = hits
+            self.add(u, r, False)
+        finally:
+            for p, hits in zip(self.pairs, kept):
+                p.state.hits = hits
+        return extended
 
     def _constraints(self) -> sp.coo_matrix:
         """The fit constraints' part of the system, linear in the unknowns: per block

@@ -167,6 +167,9 @@ class RaySurface:
     spacing: float
     h: float
     _layout: np.ndarray
+    #: polish every hit onto the element holding it (the continuous surface, no STICKY
+    #: extension; :func:`cgfem.contact._ray_kernels.trace`)
+    polish: bool = False
     _knots: np.ndarray
 
     def _seed_positions(self, u: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
@@ -234,7 +237,7 @@ class RaySurface:
                   np.ascontiguousarray(piece), np.ascontiguousarray(theta),
                   np.ascontiguousarray(start_slot), float(max_gap), ray_tol,
                   MAX_RAY_NEWTON, self._layout, self._knots, control, origin, h, shape, elements, LOCATE_TOL,
-                  connectivity, nodal, found, pc, th, g, slot, status)
+                  connectivity, nodal, found, pc, th, g, slot, status, self.polish)
         if np.any(status == _rk.OUTSIDE):
             raise ValueError(f"{int(np.sum(status == _rk.OUTSIDE))} surface points outside the active elements")
         best.found[rows], best.piece[rows], best.theta[rows], best.g[rows] = found, pc, th, g

@@ -58,6 +58,12 @@ class StepRecord:
     #: the system's whole vector of unknowns: the bodies' ``u`` followed by the contact
     #: set's own unknowns (the fitted surfaces of ``nurbs_fit``, :attr:`System.n_dofs`)
     unknowns: np.ndarray | None = field(default=None, repr=False)
+    #: Newton's force scale; the residual over it at the converged state with every NURBS+FE
+    #: master hit on the continuous surface (not on a kept element's extension past a grid
+    #: face, :data:`~cgfem.contact._ray_kernels.STICKY`); the active hits that were on one
+    reference: float = 0.0
+    continuous_residual: float = 0.0
+    extended_hits: int = 0
 
 
 @dataclass
@@ -81,6 +87,11 @@ class Increment:
     newton_residuals: list[list[float]]
     outer_changes: list[float]
     outer_converged: bool
+    #: Newton's force scale, and the residual over it with every NURBS+FE hit on the continuous
+    #: surface, with the number of active hits that lie on a kept element's extension
+    reference: float = 0.0
+    continuous_residual: float = 0.0
+    extended_hits: int = 0
 
 
 class System:
@@ -153,6 +164,15 @@ class System:
             if self.floating:
                 K = K + self._shift_factor(t, float(np.linalg.norm(r))) * self._floating_shift(K)
         return r, K
+
+    def continuous_residual(self, u: np.ndarray, t: float, frozen_stress: list[np.ndarray | None]
+                            ) -> tuple[np.ndarray, int]:
+        """The residual at ``u`` with every NURBS+FE hit on the continuous surface, in the
+        element holding it (:meth:`~cgfem.contact.assembly.ContactSet.continuous`), and how
+        many active hits lie on a kept element's extension instead."""
+        parts = [b.assemble(ub, t, s, False) for b, ub, s in zip(self.bodies, self.split(u), frozen_stress)]
+        r = np.concatenate([p[0] for p in parts] + [np.zeros(self.contact.n_extra)])
+        return r, self.contact.continuous(u, r)
 
     def _shift_factor(self, t: float, norm: float) -> float:
         """The fraction of the floating bodies' tangent shift used at a linearization point
@@ -362,7 +382,12 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
             record = StepRecord(t, outcome.newton_residuals, len(outcome.outer_changes),
                                 outcome.outer_changes, outcome.outer_converged,
                                 system.split(u.copy()), outcome.frozen_stress, recovered,
-                                time.perf_counter() - start, u.copy())
+                                time.perf_counter() - start, u.copy(), outcome.reference,
+                                outcome.continuous_residual, outcome.extended_hits)
+            if outcome.extended_hits and outcome.continuous_residual > options.newton_tol:
+                log(f"warning: t={t:.4g}: {outcome.extended_hits} active hits lie on a kept master element's "
+                    f"extension past a grid face; on the continuous NURBS+FE surface |r|/ref = "
+                    f"{outcome.continuous_residual:.3e} > newton_tol = {options.newton_tol:.1e}")
             records.append(record)
             if on_step:
                 on_step(record)
@@ -439,6 +464,11 @@ def _solve_increment(system: System, solver: _Solver, u0: np.ndarray,
         if changes[-1] <= options.outer_tol and settled:
             break
         following = relaxation.next(frozen, recovered)
+    extended, continuous = 0, 0.0
+    if contact:
+        r, extended = system.continuous_residual(u, t, frozen)
+        continuous = float(np.linalg.norm(r)) / reference if reference > 0.0 else float(np.linalg.norm(r))
     # reactions are in equilibrium with the stress the last solve held frozen; the next step
     # starts from the newest recovery
-    return Increment(u, frozen, recovered, residuals, changes, changes[-1] <= options.outer_tol and settled)
+    return Increment(u, frozen, recovered, residuals, changes, changes[-1] <= options.outer_tol and settled,
+                     reference, continuous, extended)
