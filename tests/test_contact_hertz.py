@@ -44,12 +44,13 @@ HALF_WIDTH, DEPTH = 1.0, 1.0   # block: x in [-1, 1], z in [-1, 0] (about 5 a de
 H0 = 0.2                   # level L: h = H0 / 2**L; a / h ~ 1 at level 0
 
 
-def hertz_case() -> dict:
-    """The case file (as a dict) of the half cylinder on the block."""
+def hertz_case(cyl_offset: tuple[float, float, float] = (0.37, 0.21, 0.23)) -> dict:
+    """The case file (as a dict) of the half cylinder on the block; ``cyl_offset``: the
+    cylinder grid's offset (in element sizes)."""
     material = {"model": "linear_elastic", "E": E, "nu": NU}
     cylinder = {"geometry": {"builder": "half_cylinder", "center": [0.0, 0.5 * T, R], "axis": [0, 1, 0],
                              "radius": R, "height": T, "keep": [0, 0, -1]},
-                "material": material, "grid": {"h0": H0, "offset": [0.37, 0.21, 0.23]}}
+                "material": material, "grid": {"h0": H0, "offset": list(cyl_offset)}}
     block = {"geometry": {"builder": "box", "min": [-HALF_WIDTH, 0.0, -DEPTH], "max": [HALF_WIDTH, T, 0.0]},
              "material": material, "grid": {"h0": H0, "offset": [0.13, 0.29, 0.41]}}
     return {
@@ -125,9 +126,12 @@ def measure(summary: dict, points: dict) -> HertzResult:
     return HertzResult(summary["status"], load, a, p0, float(p.max()), a_exact, p0_exact, summary, points)
 
 
-def solve(level: int, surface: str, out: Path) -> HertzResult:
-    """Run the Hertz case at ``level`` with ``surface`` into ``out`` and measure it."""
-    status = run_case(parse_case(hertz_case(), out), level, surface, out)
+def solve(level: int, surface: str, out: Path, cyl_offset: tuple[float, float, float] | None = None
+          ) -> HertzResult:
+    """Run the Hertz case at ``level`` with ``surface`` into ``out`` and measure it
+    (``cyl_offset``: another offset of the cylinder's grid)."""
+    case = hertz_case() if cyl_offset is None else hertz_case(cyl_offset)
+    status = run_case(parse_case(case, out), level, surface, out)
     summary = json.loads((out / "summary.json").read_text())
     mesh = meshio.read(out / f"contact_{len(summary['steps']):03d}.vtu")
     result = measure(summary, {**mesh.point_data, "x": mesh.points})
