@@ -15,8 +15,8 @@ import pytest
 
 from cgfem.contact import _ray_kernels as rk
 from cgfem.contact.kinematics import slave_state
-from cgfem.contact.surfaces import (CANDIDATES, MAX_RAY_NEWTON, RAY_TOL, NurbsFeSurface, RayHits,
-                                    closed_directions, pack_patches)
+from cgfem.contact.surfaces import (CANDIDATES, MAX_RAY_NEWTON, RAY_TOL, SAMPLE_REACH, NurbsFeSurface,
+                                    RayHits, closed_directions, pack_patches)
 from cgfem.embedding.quadrature import embed, grid_for
 from cgfem.fem.space import LOCATE_TOL, Space
 from cgfem.geometry.builders import build_solid
@@ -80,9 +80,11 @@ def reference_search(surface: NurbsFeSurface, u, x1, n1, previous: RayHits | Non
     ts = np.linspace(-MAX_GAP, MAX_GAP, m)
     for p in range(n):
         samples = x1[p] + ts[:, None] * n1[p]
-        nearest = np.argmin(np.linalg.norm(samples[:, None] - seeds[None], axis=2), axis=1)
+        d = np.linalg.norm(samples[:, None] - seeds[None], axis=2)
+        nearest = np.argmin(d, axis=1)
         v = seeds[nearest] - x1[p]
         off = np.linalg.norm(v - (v @ n1[p])[:, None] * n1[p], axis=1)
+        off[d[np.arange(m), nearest] > SAMPLE_REACH * surface.spacing] = np.inf
         order = np.argsort(off, kind="stable")[:min(m, 4 * CANDIDATES)]
         starts = [(previous.piece[p], previous.theta[p])] if previous is not None and previous.found[p] else []
         starts += [(surface.seed_piece[nearest[j]], surface.seed_theta[nearest[j]])
