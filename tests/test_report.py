@@ -274,7 +274,7 @@ def test_map_figures_one_panel_per_run(tmp_path):
     fig = figure("fig14", paths)
     panels = [ax for ax in fig.axes if ax.images]
     assert len(panels) == 3
-    assert [ax.get_title() for ax in panels] == ["facets L0", "nurbs_fe L0", "nurbs_fit L1 (failed at step 2)"]
+    assert [ax.get_title() for ax in panels] == ["facets L0", "nurbs_fe L0", "nurbs_fit L1 (failed beyond load 0.5)"]
     assert all(ax.images[0].get_array().std() > 0 for ax in panels)       # something was drawn
     sigma_yy = [np.asarray(meshio.read(Path(p).parent / f"surface_{Run.load(p).n_steps:03d}.vtu")
                            .point_data["stress"])[:, 4] for p in paths]
@@ -391,14 +391,14 @@ def test_outer_not_converged_is_neither_converged_nor_failed(tmp_path):
     outer, failed = runs["nurbs_fe L1"], runs["facets L0"]
     assert (outer.converged, outer.outer_not_converged, outer.failed) == (False, True, False)
     assert (failed.converged, failed.outer_not_converged, failed.failed) == (False, False, True)
-    assert outer.status_note == "outer loop not converged" and failed.status_note == "failed at step 3"
+    assert outer.status_note == "outer loop not converged" and failed.status_note == "failed beyond load 0.667"
     assert runs["nurbs_fe L0"].status_note == ""
     fig = figure("fig13", paths, pulled=PULLED, clamped=CLAMPED)
     by_label = {line.get_label(): line for line in fig.axes[0].get_lines()}
     line = by_label["nurbs_fe L1 (outer loop not converged)"]
     assert line.get_linestyle() == ":" and line.get_markerfacecolor() == "white"
     np.testing.assert_allclose(line.get_xdata(), [0.0, 0.2, 0.4, 0.6, 0.8, 1.0])
-    assert by_label["facets L0 (failed at step 3)"].get_linestyle() == "--"
+    assert by_label["facets L0 (failed beyond load 0.667)"].get_linestyle() == "--"
     assert by_label["nurbs_fe L0"].get_linestyle() == "-"
     level_panel = fig.axes[2]
     np.testing.assert_allclose(level_panel.get_lines()[0].get_ydata(), [50.0, 45.0])

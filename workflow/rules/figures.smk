@@ -99,7 +99,7 @@ rule fig15:
 rule fig17:
     """Fig. 17: von Mises on the middle link of chain3, facets vs nurbs_fe."""
     input:
-        summaries("chain3", surfaces=["facets", "nurbs_fe"], levels=[config["figures"]["fig17"]["level"]]),
+        summaries("chain3", surfaces=["facets", "nurbs_fe"], levels=config["figures"]["fig17"]["levels"]),
     output:
         png=report(
             "paper_figures/fig17.png", caption="../report/fig17.rst", category="Paper"

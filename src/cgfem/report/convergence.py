@@ -6,7 +6,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from cgfem.report.energy import TOTAL, ErrorRow, read_error_tables
-from cgfem.report.style import colour, new_figure
+from cgfem.report.style import new_figure, pen
 
 #: spatial dimension: DOFs grow like h^-3 in the 3D slab
 DIMENSION = 3
@@ -52,7 +52,7 @@ def fig09_energy_error(tables, bodies: tuple[str, ...] = (TOTAL,)) -> Figure:
             sel = sorted((r for r in rows if (r.surface, r.body) == (surface, body)),
                          key=lambda r: r.level)
             ax.loglog([r.dofs for r in sel], [r.error for r in sel], marker="o",
-                      color=colour(surface), label=f"{surface}: rate {fitted[surface, body]:.2f}")
+                      **pen(surface), label=f"{surface}: rate {fitted[surface, body]:.2f}")
         sel = [r for r in rows if r.body == body]
         _slope_triangle(ax, np.array([r.dofs for r in sel], float),
                         np.array([r.error for r in sel]), OPTIMAL_RATE)

@@ -9,7 +9,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from cgfem.report.runs import BODY, DISPLACEMENT, Run, load_runs
-from cgfem.report.style import FAILED_STYLE, OUTER_NOT_CONVERGED_STYLE, colour, marker, new_figure
+from cgfem.report.style import FAILED_STYLE, OUTER_NOT_CONVERGED_STYLE, colour, marker, new_figure, pen
 
 AXES = {"x": 0, "y": 1, "z": 2}
 
@@ -17,7 +17,7 @@ AXES = {"x": 0, "y": 1, "z": 2}
 def _style(run: Run) -> dict:
     """Line style of a run: colour by surface, marker by level; dashed with crosses if it
     failed, dotted with hollow markers if its outer loop did not converge."""
-    style = {"color": colour(run.surface), "marker": marker(run.level)}
+    style = {**pen(run.surface), "marker": marker(run.level)}
     if run.failed:
         style.update(FAILED_STYLE)
     elif run.outer_not_converged:
@@ -90,7 +90,7 @@ def fig10_surface_profile(summaries, body: str, line: dict[str, float], along: s
     for run in load_runs(summaries):
         band = band_fraction * float(run.body(body)["h"])
         s, u = surface_profile(run, body, line, along, component, band)
-        ax.plot(s, u, linewidth=0.8, markersize=2.5, label=_label(run), **_style(run))
+        ax.plot(s, u, label=_label(run), **{**_style(run), "linewidth": 0.8, "markersize": 2.5})
         for name, (rest, moved) in run.fitted_surfaces().items():
             if name.split("/")[0] == body:
                 fs, fu = fitted_profile(rest, moved, line, along, component)
@@ -125,7 +125,7 @@ def fig13_reactions(summaries, pulled: str, clamped: str, component: str = "y") 
         if not done:
             continue
         ax.plot([r.level for r in done], [r.reactions(pulled)[-1, c] for r in done], marker="o",
-                color=colour(surface), label=surface)
+                **pen(surface), label=surface)
         outer = [r for r in done if r.outer_not_converged]
         if outer:
             ax.scatter([r.level for r in outer], [r.reactions(pulled)[-1, c] for r in outer],
@@ -144,8 +144,8 @@ def fig_newton_residuals(summaries) -> Figure:
     for ax, case in zip(axes[0], cases):
         for run in (r for r in runs if r.case == case):
             res = run.newton_residuals()
-            ax.semilogy(np.arange(res.size), res, linewidth=0.8, markersize=2, label=_label(run),
-                        **_style(run))
+            ax.semilogy(np.arange(res.size), res, label=_label(run),
+                        **{**_style(run), "linewidth": 0.8, "markersize": 2})
         ax.set(title=case, xlabel="Newton iteration (all steps and passes)",
                ylabel="relative residual")
         ax.legend(ncol=2)
@@ -198,7 +198,7 @@ def fig_geometry_error(summaries) -> Figure:
         group.sort(key=lambda r: r.level)
         errors = np.maximum(np.array([geometry_errors(r) for r in group]), ERROR_FLOOR)
         for k, ax in enumerate(axes[0]):
-            ax.semilogy([r.level for r in group], errors[:, k], marker="o", color=colour(surface),
+            ax.semilogy([r.level for r in group], errors[:, k], marker="o", **pen(surface),
                         linestyle=styles[cases.index(case) % len(styles)], label=f"{case} {surface}")
     for ax, what in zip(axes[0], ("volume", "area")):
         ax.set(title=f"{what} of the quadrature", xlabel="level", ylabel=f"relative {what} error")

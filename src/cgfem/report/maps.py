@@ -122,11 +122,12 @@ def fig15_deformed_shapes(summaries) -> Figure:
 
 def fig17_von_mises(summaries, body: str) -> Figure:
     """Von Mises stress on the boundary of ``body`` (undeformed) at the last step, one panel
-    per run, one colour scale; titles give the run's peak von Mises of that body."""
+    per run (two per row: facets beside nurbs_fe at each level), one colour scale; titles
+    give the run's peak von Mises of that body."""
     runs = load_runs(summaries)
     clouds = [_cloud(r, body, warp=False) for r in runs]
     values = [np.asarray(c[2][VON_MISES], float).ravel() for c in clouds]
     clim = _clim(values)
     images = [render_points(c[0], v, clim, "jet") for c, v in zip(clouds, values)]
     titles = [f"{_title(r)}: peak {r.max_von_mises(body) / 1e6:.4g} MPa" for r in runs]
-    return image_grid(images, titles, clim, "jet", f"von Mises on {body} (Pa)")
+    return image_grid(images, titles, clim, "jet", f"von Mises on {body} (Pa)", max_cols=2)

@@ -98,7 +98,8 @@ class Run:
             return ""
         if self.outer_not_converged:
             return "outer loop not converged"
-        return f"failed at step {self.n_steps + 1}"
+        reached = self.load_factors()[-1] if self.n_steps else 0.0
+        return f"failed beyond load {reached:.3g}"
 
     @property
     def steps(self) -> list[dict]:

@@ -13,6 +13,9 @@ from matplotlib.figure import Figure  # noqa: E402
 
 #: colour of each contact-surface definition
 SURFACE_COLOURS = {"facets": "#d95f02", "nurbs_fe": "#1b9e77", "nurbs_fit": "#7570b3"}
+#: line width and marker size of each definition: nurbs_fe and nurbs_fit often coincide to
+#: plotting accuracy, so nurbs_fe is drawn wide beneath nurbs_fit's thin line and both show
+SURFACE_WIDTHS = {"facets": (1.2, 4.0), "nurbs_fe": (2.8, 6.5), "nurbs_fit": (1.0, 3.0)}
 #: marker of each mesh level
 LEVEL_MARKERS = ("o", "s", "^", "D", "v", "P")
 #: line style of a run that failed to converge (stopped before its last step)
@@ -30,6 +33,12 @@ plt.rcParams.update(RC)  # the report's style, for every figure drawn after this
 
 def colour(surface: str) -> str:
     return SURFACE_COLOURS.get(surface, "black")
+
+
+def pen(surface: str) -> dict:
+    """Matplotlib line keywords of ``surface``: colour, line width, marker size."""
+    width, size = SURFACE_WIDTHS.get(surface, (1.2, 4.0))
+    return {"color": colour(surface), "linewidth": width, "markersize": size}
 
 
 def marker(level: int) -> str:
