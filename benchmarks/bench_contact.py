@@ -217,7 +217,8 @@ def build_system(level: int, definition: str):
 
 
 def contact_state(system) -> np.ndarray:
-    """link_b moved by h/2 towards link_a plus a smooth field of 0.01 h on both (n_dofs,)."""
+    """link_b moved by h/2 towards link_a plus a smooth field of 0.01 h on both (n_dofs,;
+    with nurbs_fit the fitted control displacements and multipliers follow)."""
     parts = []
     for i, body in enumerate(system.bodies):
         h = body.space.h
@@ -225,7 +226,15 @@ def contact_state(system) -> np.ndarray:
         if body.name == "link_b":
             u[:, 1] += 0.5 * h
         parts.append(u.ravel())
-    return np.concatenate(parts)
+    u = np.concatenate(parts)
+    # nurbs_fit: the fitted patches' control displacements at the fit of that field
+    # (M Z = G u), their multipliers 0
+    extra = np.zeros(system.contact.n_extra)
+    u = np.concatenate([u, extra])
+    for block in system.contact.blocks:
+        body = system.split(u)[block.body]
+        u[block.z] = block.fit.factor.solve(block.fit.G @ body.reshape(-1, 3)).ravel()
+    return u
 
 
 def part_iteration(level: int, definition: str, repeat: int) -> dict:
@@ -245,17 +254,20 @@ def part_iteration(level: int, definition: str, repeat: int) -> dict:
     near_null = system.near_null()
     backend = choose_backend(system.n_dofs, system.symmetric, "auto")
 
+    extra = system.contact.n_extra      # nurbs_fit's fitted controls and multipliers
+
     def bulk():
         parts = [b.assemble(ub, t, s, True) for b, ub, s in zip(system.bodies, us, frozen)]
-        return np.concatenate([p[0] for p in parts]), sp.block_diag([p[1] for p in parts], format="csr")
+        blocks = [p[1] for p in parts] + ([sp.csr_matrix((extra, extra))] if extra else [])
+        return np.concatenate([p[0] for p in parts] + [np.zeros(extra)]), sp.block_diag(blocks, format="csr")
 
     def contact(tangent: bool):
         r = np.zeros(system.n_dofs)
         return r, system.contact.add(u, r, tangent)
 
     def search():
-        for p in system.contact.pairs:
-            p.search(us[p.slave], us[p.master])
+        for k, p in enumerate(system.contact.pairs):
+            p.search(*system.contact._split(u, k))    # the pair's kinematic vectors
 
     timings = {}
     for name, fn in (("bulk", bulk), ("contact", lambda: contact(True)),

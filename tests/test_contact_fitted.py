@@ -12,7 +12,7 @@ import pytest
 import scipy.sparse as sp
 
 from cgfem.contact.fit import build_fits, c1_extraction, fit_space
-from cgfem.contact.fitted import FittedSurface
+from cgfem.contact.fitted import FittedSurface, merge_columns
 from cgfem.contact.pair import ContactPair, slave_gradients
 from cgfem.embedding.quadrature import embed, grid_for
 from cgfem.fem.space import Space
@@ -116,3 +116,22 @@ def test_closed_directions_stay_closed():
     gb = surface.derivatives(np.column_stack([np.full(7, u1), s]), 1)
     ratio = np.linalg.norm(ga[:, 1, 0], axis=1) / np.linalg.norm(gb[:, 1, 0], axis=1)
     np.testing.assert_allclose(a[:, 1, 0], b[:, 1, 0] * ratio[:, None], rtol=1e-9, atol=1e-12)
+
+
+def test_merged_columns_move_points_as_the_raw_basis():
+    """Merging a point's equal controls (ties spread one control over several free ones)
+    keeps ``coef @ Z`` and leaves each point with distinct controls only."""
+    rng = np.random.default_rng(3)
+    n, w = 40, 12
+    nodes = rng.integers(0, 7, (n, w))
+    coef = rng.normal(size=(n, 6, w))
+    valid = rng.random((n, w)) < 0.8
+    valid[:, 0] = True
+    Z = rng.normal(size=(7, 3))
+    merged_nodes, merged_coef = merge_columns(nodes, coef, valid)
+    raw = np.einsum("prw,pwk->prk", np.where(valid[:, None], coef, 0.0), Z[nodes])
+    np.testing.assert_allclose(np.einsum("prw,pwk->prk", merged_coef, Z[merged_nodes]), raw, atol=1e-13)
+    for row, c in zip(merged_nodes, merged_coef[:, 0]):
+        live = row[c != 0.0]
+        assert live.size == np.unique(live).size
+    assert merged_nodes.shape[1] == max(np.unique(nodes[i][valid[i]]).size for i in range(n))

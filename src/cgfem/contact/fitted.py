@@ -70,6 +70,33 @@ def _padded_map(T: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray]:
     return cols, vals
 
 
+def merge_columns(nodes: np.ndarray, coef: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per point, the distinct controls among ``nodes`` (n, W) where ``valid`` (n, W), with
+    the coefficients ``coef`` (n, 6, W) of equal controls summed: (n, W') and (n, 6, W'), W'
+    the largest count of distinct controls of a point; shorter rows are padded with their
+    first control and coefficient 0. A fitted point's (p+1)(q+1) controls each spread over
+    the free controls tied to them (at double knots and seams): 36 entries with biquadratic
+    patches, 9 distinct, and the tangent's blocks shrink by (36/9)^2."""
+    n, w = nodes.shape
+    last = np.iinfo(np.int64).max
+    key = np.where(valid, nodes, last)
+    order = np.argsort(key, axis=1, kind="stable")
+    key = np.take_along_axis(key, order, axis=1)
+    coef = np.take_along_axis(coef, order[:, None, :], axis=2)
+    real = key != last
+    new = np.ones((n, w), bool)
+    new[:, 1:] = key[:, 1:] != key[:, :-1]
+    new &= real
+    group = np.cumsum(new, axis=1) - 1
+    width = max(int(new.sum(axis=1).max(initial=1)), 1)
+    rows = np.broadcast_to(np.arange(n)[:, None], (n, w))
+    out_nodes = np.repeat(key[:, :1], width, axis=1)
+    out_nodes[rows[real], group[real]] = key[real]
+    out = np.zeros((n * width, coef.shape[1]))
+    np.add.at(out, (rows * width + group)[real], np.moveaxis(coef, 2, 1)[real])
+    return out_nodes, np.moveaxis(out.reshape(n, width, -1), 1, 2).copy()
+
+
 class FittedSurface(RaySurface):
     """The fitted patches of one body as a contact surface (module docstring)."""
 
@@ -88,16 +115,19 @@ class FittedSurface(RaySurface):
         #: first node (free control) of every fit in the surface's vector of unknowns
         self.node_offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         self._maps = [_padded_map(f.T) for f in self.fits]
-        self.width = max(((f.surface.degree[0] + 1) * (f.surface.degree[1] + 1)) * m[0].shape[1]
-                         for f, m in zip(self.fits, self._maps))
+        #: entries of a point's basis before equal controls are merged (:func:`merge_columns`)
+        self._spread = max(((f.surface.degree[0] + 1) * (f.surface.degree[1] + 1)) * m[0].shape[1]
+                           for f, m in zip(self.fits, self._maps))
         self._layout, self._knots, self._control = pack_patches([f.surface for f in self.fits])
         keep = np.isin(seeds.patch, list(self.local))
         self.seed_piece = np.array([self.local[int(p)] for p in seeds.patch[keep]], np.int64)
         self.seed_theta = np.ascontiguousarray(seeds.uv[keep])
         ref, coef, nodes = self._basis(self.seed_piece, self.seed_theta)
         self._seed_X = ref[:, 0]
-        n = self.seed_piece.size
-        self._seed_S = sp.csr_matrix((coef[:, 0].ravel(), nodes.ravel(), np.arange(0, n * self.width + 1, self.width)),
+        n, w = nodes.shape
+        #: controls a point moves with (at the seeds; a point elsewhere may have a few more)
+        self.width = w
+        self._seed_S = sp.csr_matrix((coef[:, 0].ravel(), nodes.ravel(), np.arange(0, n * w + 1, w)),
                                      shape=(n, self.n_nodes))
         self.spacing = (float(cKDTree(self._seed_X).query(self._seed_X, k=2)[0][:, 1].max())
                         if n > 1 else self.h)
@@ -125,8 +155,9 @@ class FittedSurface(RaySurface):
         the free controls (n, 6, W) and those controls (n, W), as surface nodes."""
         n = piece.size
         ref = np.zeros((n, 6, 3))
-        coef = np.zeros((n, 6, self.width))
-        nodes = np.zeros((n, self.width), np.int64)
+        coef = np.zeros((n, 6, self._spread))
+        nodes = np.zeros((n, self._spread), np.int64)
+        valid = np.zeros((n, self._spread), bool)
         for k in np.unique(piece):
             rows = np.flatnonzero(piece == k)
             fit = self.fits[k]
@@ -138,6 +169,8 @@ class FittedSurface(RaySurface):
             width = c.shape[1] * c.shape[2]
             nodes[rows, :width] = c.reshape(rows.size, width) + self.node_offsets[k]
             coef[rows, :, :width] = v.reshape(rows.size, 6, width)
+            valid[rows, :width] = (vals[b.index] != 0.0).reshape(rows.size, width)
+        nodes, coef = merge_columns(nodes, coef, valid)
         return ref, coef, nodes
 
     # -- slave side ----------------------------------------------------------------------
