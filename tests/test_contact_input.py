@@ -32,6 +32,7 @@ def _with_contact(entries: list[dict]) -> dict:
     ([{"slave": "lower", "master": "upper", "kappa": -3.0}], "contact[0].kappa", ""),
     ([{"slave": "lower", "master": "upper", "fit": "fine"}], "contact[0].fit", ""),
     ([{"slave": "lower", "master": "upper", "fit": -1}], "contact[0].fit", ""),
+    ([{"slave": "lower", "master": "upper", "rule": "mortar"}], "contact[0].rule", ""),
 ])
 def test_bad_contact_entries(tmp_path, entries, field, words):
     with pytest.raises(InputError) as err:
@@ -64,3 +65,15 @@ def test_fit_option(tmp_path, fit):
     case = parse_case(_with_contact([{"slave": "lower", "master": "upper", "fit": fit}]), tmp_path)
     assert case.contact[0].fit == fit
     assert parse_case(_with_contact([{"slave": "lower", "master": "upper"}]), tmp_path).contact[0].fit == "auto"
+
+
+def test_segmented_rule_with_facets_is_refused(tmp_path, capsys):
+    """``rule: segmented`` splits exact NURBS patches: with ``--surface facets`` exit 2, one
+    line naming the field, before any body is built (no output folder)."""
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(_with_contact([{"slave": "lower", "master": "upper", "rule": "segmented"}])))
+    code = main(["run", str(path), "--level", "0", "--surface", "facets", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1 and "contact[0].rule" in err[0] and "facets" in err[0]
+    assert not (tmp_path / "out").exists()

@@ -119,6 +119,10 @@ def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None
     if case.contact and surface not in CONTACT_DEFINITIONS:
         raise InputError("--surface", f"contact with {surface!r} is not implemented yet "
                          f"(available: {', '.join(CONTACT_DEFINITIONS)})")
+    for i, spec in enumerate(case.contact):
+        if spec.rule == "segmented" and surface == "facets":
+            raise InputError(f"contact[{i}].rule", "'segmented' needs a NURBS surface definition "
+                                                   "(--surface nurbs_fe or nurbs_fit), not facets")
     solids = {b.name: build_solid(b.geometry) for b in case.bodies}
     brep = {name: brep_measures(solid) for name, solid in solids.items()}
     check_memory(case, level, brep)

@@ -280,8 +280,9 @@ def _contact(i: int, raw: Mapping[str, Any], names: tuple[str, ...]) -> ContactP
     require_body(names, raw["master"], f"{prefix}.master")
     kappa = _number(raw.get("kappa", ContactPair.kappa), f"{prefix}.kappa")
     patches = {key: tuple(raw[key]) for key in ("slave_patches", "master_patches") if key in raw}
-    if "fit" in raw:
-        patches["fit"] = raw["fit"]
+    for key in ("fit", "rule"):
+        if key in raw:
+            patches[key] = raw[key]
     return _within(prefix, ContactPair, raw["slave"], raw["master"], kappa, **patches)
 
 

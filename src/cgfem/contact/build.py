@@ -6,6 +6,10 @@ pair's ``slave_patches``; the master surface is the master body's ``master_patch
 same surface definition. ``max_gap`` (the farthest a ray looks) is
 :data:`~cgfem.contact.pair.MAX_GAP_H` times the larger element size of the two bodies.
 
+With ``rule: segmented`` (:mod:`cgfem.contact.rule`) the slave points are instead the exact
+slave patches split by both grids' planes, at most 27 points per part (NURBS definitions
+only: a facets pair so configured is refused).
+
 ``nurbs_fit``: both sides are fitted surfaces (:class:`~cgfem.contact.fitted.FittedSurface`)
 of the pair's patches, fitted on each body's exact surface rule in the fitting space the
 pair's ``fit`` option names; the slave points are the same exact points as ``nurbs_fe``'s.
@@ -19,7 +23,9 @@ from cgfem.case.model import ContactPair as ContactSpec
 from cgfem.contact.fit import build_fits
 from cgfem.contact.fitted import FittedSurface
 from cgfem.contact.pair import MAX_GAP_H, ContactPair, slave_gradients
+from cgfem.contact.rule import segmented_rule
 from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface
+from cgfem.errors import InputError
 from cgfem.geometry.solid import Solid
 
 DEFINITIONS = ("facets", "nurbs_fe", "nurbs_fit")
@@ -43,15 +49,22 @@ def build_pair(name: str, spec: ContactSpec, index: dict[str, int], models: list
     s_emb, m_emb = s_model.embedding, m_model.embedding
     s_ids = patch_ids(tuple(p.name for p in s_solid.patches), spec.slave_patches)
     m_ids = patch_ids(tuple(p.name for p in m_solid.patches), spec.master_patches)
+    segmented = spec.rule == "segmented"
+    if segmented and definition == "facets":
+        raise InputError("rule", "'segmented' needs a NURBS surface definition (nurbs_fe, nurbs_fit), not facets")
     rule = s_emb.boundary.select(np.isin(s_emb.boundary.patch, s_ids) & (s_emb.boundary.w > 0.0))
     slave_surface = None
     if definition == "nurbs_fe":
+        if segmented:
+            rule = segmented_rule(s_solid, s_emb.grid, m_emb.grid, s_ids)
         frames = NurbsFeSurface(s_solid, s_model.space, rule, s_ids).slave_frames(rule)
         master = NurbsFeSurface(m_solid, m_model.space, m_emb.surface, m_ids)
     elif definition == "nurbs_fit":
         E_m = E if E_master is None else E_master
-        slave_surface = FittedSurface(index[spec.slave], build_fits(s_solid, s_emb.surface, s_model.space, s_ids,
-                                                                    spec.fit), s_emb.surface, E / s_model.space.h)
+        s_fits = build_fits(s_solid, s_emb.surface, s_model.space, s_ids, spec.fit)
+        slave_surface = FittedSurface(index[spec.slave], s_fits, s_emb.surface, E / s_model.space.h)
+        if segmented:
+            rule = segmented_rule(s_solid, s_emb.grid, m_emb.grid, s_ids, {f.patch: f.surface for f in s_fits})
         frames = slave_surface.slave_frames(rule)
         master = FittedSurface(index[spec.master], build_fits(m_solid, m_emb.surface, m_model.space, m_ids, spec.fit),
                                m_emb.surface, E_m / m_model.space.h)

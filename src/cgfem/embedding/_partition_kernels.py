@@ -22,6 +22,11 @@ the grid element ``(i, j, k)``; per point of a trimming curve on a grid plane ``
 of any axis ``k`` (needed for the exact volume rules of cut elements): position, length
 weight, the in-plane unit normal pointing out of the solid's section, the axis and the plane
 index.
+
+A second grid (``origin2``, ``h2 > 0``) adds its planes to the cuts: every part then lies in
+one element of each grid (the contact rule split at the master's element faces,
+:mod:`cgfem.contact.rule`). Elements are still those of the first grid, and the second
+grid's planes emit no trimming points.
 """
 
 from __future__ import annotations
@@ -396,7 +401,7 @@ def _integrate_cell(pnet, pn, onet, oa, ob, ia, ib, swapped, fk, fc, fplane, kin
         x1 = allbp[iv + 1]
         xm = 0.5 * (x0 + x1)
         for f in range(nf):
-            if kinds[f] != 1:
+            if kinds[f] != 1 or fplane[f] < 0:
                 continue
             if _inner_root(pn, fk[f], fc[f], xm, ia, ib, icoef) < 0.0:
                 continue
@@ -405,6 +410,8 @@ def _integrate_cell(pnet, pn, onet, oa, ob, ia, ib, swapped, fk, fc, fplane, kin
     # trimming lines of planes constant along the inner direction
     for v in range(nv):
         f = vfunc[v]
+        if fplane[f] < 0:
+            continue
         sigma = vroot[v]
         n = _line_segments(pn, fk, fc, kinds, nf, sigma, ia, ib, icoef, rts, rfs, seg)
         for sgi in range(n + 1):
@@ -434,10 +441,52 @@ def _unit_cross(a, b, out):
 
 
 @njit(cache=True)
-def partition_piece(pnet, origin, h, shape, GX, GW, rule, max_depth,
+def _cutting_planes(cnet, lo, hi, og, hg, second, origin, h, touch, fk, fc, fplane, nf):
+    """Append to ``fk, fc, fplane`` (from ``nf``) the planes ``x_a = og_a + i hg`` of one grid
+    that cut the cell of control net ``cnet`` (bounding box ``lo, hi``); a plane of the
+    ``second`` grid gets ``fplane = -1`` and is skipped where it coincides (within
+    ``touch``) with a plane of the first grid ``(origin, h)``. Returns ``(nf, too_many)``."""
+    p = cnet.shape[0] - 1
+    q = cnet.shape[1] - 1
+    for a in range(3):
+        i0 = int(np.floor((lo[a] - og[a]) / hg))
+        i1 = int(np.ceil((hi[a] - og[a]) / hg))
+        for ip in range(i0, i1 + 1):
+            c = og[a] + ip * hg
+            if not (lo[a] + touch < c < hi[a] - touch):
+                continue
+            if second:
+                near = origin[a] + np.floor((c - origin[a]) / h + 0.5) * h
+                if abs(c - near) <= touch:
+                    continue
+            # a plane that only touches the control net (within ``touch``, e.g. tangent
+            # to the surface along a knot line) does not cut the cell
+            pos = True
+            neg = True
+            for i in range(p + 1):
+                for j in range(q + 1):
+                    v = cnet[i, j, a] / cnet[i, j, 3] - c
+                    if not v > -touch:
+                        pos = False
+                    if not v < touch:
+                        neg = False
+            if pos or neg:
+                continue
+            if nf == MAX_FUNCS:
+                return nf, True
+            fk[nf] = a
+            fc[nf] = c
+            fplane[nf] = -1 if second else ip
+            nf += 1
+    return nf, False
+
+
+@njit(cache=True)
+def partition_piece(pnet, origin, h, shape, origin2, h2, GX, GW, rule, max_depth,
                     out_st, out_x, out_w, out_n, out_e,
                     trim_x, trim_w, trim_m, trim_axis, trim_plane, trim_st, counts):
-    """Split the Bezier piece ``pnet`` by the grid planes and integrate it (module docstring).
+    """Split the Bezier piece ``pnet`` by the grid planes and integrate it (module docstring);
+    ``origin2`` (3,), ``h2``: a second grid whose planes also cut (none if ``h2 <= 0``).
 
     ``GX[n, :n], GW[n, :n]``: n-point Gauss rules on [0, 1]; ``rule`` = (log of the
     tolerance, fewest points, most points) per interval (:func:`gauss_order`). ``counts`` (4,) int64 receives the numbers of surface
@@ -486,33 +535,12 @@ def partition_piece(pnet, origin, h, shape, GX, GW, rule, max_depth,
                     hi[a] = max(hi[a], v)
         nf = 0
         too_many = False
-        for a in range(3):
-            i0 = int(np.floor((lo[a] - origin[a]) / h))
-            i1 = int(np.ceil((hi[a] - origin[a]) / h))
-            for ip in range(i0, i1 + 1):
-                c = origin[a] + ip * h
-                if not (lo[a] + touch < c < hi[a] - touch):
-                    continue
-                # a plane that only touches the control net (within ``touch``, e.g. tangent
-                # to the surface along a knot line) does not cut the cell
-                pos = True
-                neg = True
-                for i in range(p + 1):
-                    for j in range(q + 1):
-                        v = cnet[i, j, a] / cnet[i, j, 3] - c
-                        if not v > -touch:
-                            pos = False
-                        if not v < touch:
-                            neg = False
-                if pos or neg:
-                    continue
-                if nf == MAX_FUNCS:
-                    too_many = True
-                    break
-                fk[nf] = a
-                fc[nf] = c
-                fplane[nf] = ip
-                nf += 1
+        for g in range(2):
+            og = origin if g == 0 else origin2
+            hg = h if g == 0 else h2
+            if hg <= 0.0 or too_many:
+                continue
+            nf, too_many = _cutting_planes(cnet, lo, hi, og, hg, g == 1, origin, h, touch, fk, fc, fplane, nf)
         if nf == 0 and not too_many:
             _emit_cell(pnet, sa, sb, ta, tb, origin, h, shape, GX, GW, rule,
                        out_st, out_x, out_w, out_n, out_e, counts)

@@ -103,7 +103,7 @@ def gauss_tables(n_max: int) -> tuple[np.ndarray, np.ndarray]:
     return GX, GW
 
 
-def _run_piece(net, grid: CartesianGrid, GX, GW, rule, capacity: int):
+def _run_piece(net, grid: CartesianGrid, GX, GW, rule, capacity: int, cut_by: CartesianGrid | None = None):
     while True:
         out_st = np.empty((capacity, 2))
         out_x = np.empty((capacity, 3))
@@ -118,7 +118,9 @@ def _run_piece(net, grid: CartesianGrid, GX, GW, rule, capacity: int):
         trim_st = np.empty((capacity, 2))
         counts = np.zeros(4, np.int64)
         _k.partition_piece(net, np.asarray(grid.origin, float), float(grid.h),
-                           np.asarray(grid.shape, np.int64), GX, GW, rule, MAX_DEPTH,
+                           np.asarray(grid.shape, np.int64),
+                           np.asarray(grid.origin if cut_by is None else cut_by.origin, float),
+                           0.0 if cut_by is None else float(cut_by.h), GX, GW, rule, MAX_DEPTH,
                            out_st, out_x, out_w, out_n, out_e,
                            trim_x, trim_w, trim_m, trim_axis, trim_plane, trim_st, counts)
         if counts[3] == 0:
@@ -129,19 +131,25 @@ def _run_piece(net, grid: CartesianGrid, GX, GW, rule, capacity: int):
 
 
 def partition_surface(solid: Solid, grid: CartesianGrid, tol: float = DEFAULT_TOL,
-                      min_points: int = MIN_POINTS, max_points: int = MAX_POINTS) -> SurfacePartition:
+                      min_points: int = MIN_POINTS, max_points: int = MAX_POINTS,
+                      cut_by: CartesianGrid | None = None, patches=None) -> SurfacePartition:
     """Surface and grid-plane trimming quadratures of ``solid`` cut by ``grid``; ``tol`` is
-    the target relative accuracy of each Gauss interval."""
+    the target relative accuracy of each Gauss interval. ``cut_by``: a second grid whose
+    planes also split the surface (its elements are not reported and its planes give no
+    trimming points); ``patches``: the patch indices to partition (default all)."""
     GX, GW = gauss_tables(max_points)
     rule = np.array([np.log(tol), min_points, max_points], float)
     rows = {k: [] for k in _SURFACE_FIELDS}
     trims = {k: [] for k in ("x", "w", "normal", "axis", "element")}
     approx = 0
     for ip, patch in enumerate(solid.patches):
+        if patches is not None and ip not in patches:
+            continue
         for leaf, (piece, (u0, u1), (v0, v1)) in enumerate(bezier_patches(patch.surface)):
             net = np.ascontiguousarray(piece.control)
             capacity = 4096
-            (st, x, w, n, e, tx, tw, tm, taxis, tplane, n_approx) = _run_piece(net, grid, GX, GW, rule, capacity)
+            (st, x, w, n, e, tx, tw, tm, taxis, tplane, n_approx) = _run_piece(net, grid, GX, GW, rule, capacity,
+                                                                               cut_by)
             approx += n_approx
             uv = np.column_stack([u0 + st[:, 0] * (u1 - u0), v0 + st[:, 1] * (v1 - v0)])
             rows["patch"].append(np.full(w.shape, ip, np.int64))
