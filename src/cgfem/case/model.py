@@ -204,6 +204,11 @@ class TractionBC:
 BoundaryCondition = DisplacementBC | TractionBC
 
 
+#: slave rules of a contact pair: the slave's boundary rule (the paper's) or the slave split
+#: at both grids' planes (:mod:`cgfem.contact.rule`)
+CONTACT_RULES = ("boundary", "segmented")
+
+
 @dataclass(frozen=True)
 class ContactPair:
     """Contact of the ``slave`` body's surface against the ``master`` body; penalty
@@ -217,8 +222,8 @@ class ContactPair:
     #: the fitting space of ``nurbs_fit`` (:func:`cgfem.contact.fit.fit_space`): "auto",
     #: "none" or a number of knots inserted per span
     fit: str | int = "auto"
-    #: where the contact work is integrated on the slave (:mod:`cgfem.contact.rule`):
-    #: "boundary" (the slave's boundary rule) or "segmented" (split at both grids' planes)
+    #: where the contact work is integrated on the slave (:mod:`cgfem.contact.rule`), one
+    #: of :data:`CONTACT_RULES`
     rule: str = "boundary"
 
     def __post_init__(self) -> None:
@@ -227,8 +232,8 @@ class ContactPair:
         fit = self.fit
         if not (fit in ("auto", "none") or (isinstance(fit, int) and not isinstance(fit, bool) and fit >= 0)):
             raise InputError("fit", f"expected 'auto', 'none' or an integer >= 0, got {fit!r}")
-        if self.rule not in ("boundary", "segmented"):
-            raise InputError("rule", f"expected 'boundary' or 'segmented', got {self.rule!r}")
+        if self.rule not in CONTACT_RULES:
+            raise InputError("rule", f"expected one of {', '.join(CONTACT_RULES)}, got {self.rule!r}")
         for name in ("slave_patches", "master_patches"):
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, _patches(getattr(self, name)))

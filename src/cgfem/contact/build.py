@@ -25,6 +25,7 @@ from cgfem.contact.fitted import FittedSurface
 from cgfem.contact.pair import MAX_GAP_H, ContactPair, slave_gradients
 from cgfem.contact.rule import segmented_rule
 from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface
+from cgfem.embedding.partition import SurfaceQuadrature
 from cgfem.errors import InputError
 from cgfem.geometry.solid import Solid
 
@@ -35,6 +36,15 @@ def patch_ids(solid_names: tuple[str, ...], wanted: tuple[str, ...] | None) -> n
     """Indices of the patches (of a body whose patches are named ``solid_names``) named in
     ``wanted`` (None: all)."""
     return np.array([i for i, name in enumerate(solid_names) if wanted is None or name in wanted], np.int64)
+
+
+def _slave_rule(spec: ContactSpec, solid: Solid, emb, master_emb, ids: np.ndarray, fits=()) -> SurfaceQuadrature:
+    """The slave points of the pair ``spec`` (:mod:`cgfem.contact.rule`) on the patches
+    ``ids`` of the slave ``solid`` embedded as ``emb``; ``fits``: the slave's fitted patches
+    (``nurbs_fit``), whose knot lines the segmented rule also splits at."""
+    if spec.rule == "segmented":
+        return segmented_rule(solid, emb.grid, master_emb.grid, ids, {f.patch: f.surface for f in fits})
+    return emb.boundary.select(np.isin(emb.boundary.patch, ids) & (emb.boundary.w > 0.0))
 
 
 def build_pair(name: str, spec: ContactSpec, index: dict[str, int], models: list, solids: dict[str, Solid],
@@ -49,28 +59,25 @@ def build_pair(name: str, spec: ContactSpec, index: dict[str, int], models: list
     s_emb, m_emb = s_model.embedding, m_model.embedding
     s_ids = patch_ids(tuple(p.name for p in s_solid.patches), spec.slave_patches)
     m_ids = patch_ids(tuple(p.name for p in m_solid.patches), spec.master_patches)
-    segmented = spec.rule == "segmented"
-    if segmented and definition == "facets":
+    if spec.rule == "segmented" and definition == "facets":
         raise InputError("rule", "'segmented' needs a NURBS surface definition (nurbs_fe, nurbs_fit), not facets")
-    rule = s_emb.boundary.select(np.isin(s_emb.boundary.patch, s_ids) & (s_emb.boundary.w > 0.0))
+
     slave_surface = None
     if definition == "nurbs_fe":
-        if segmented:
-            rule = segmented_rule(s_solid, s_emb.grid, m_emb.grid, s_ids)
+        rule = _slave_rule(spec, s_solid, s_emb, m_emb, s_ids)
         frames = NurbsFeSurface(s_solid, s_model.space, rule, s_ids).slave_frames(rule)
         master = NurbsFeSurface(m_solid, m_model.space, m_emb.surface, m_ids)
     elif definition == "nurbs_fit":
         E_m = E if E_master is None else E_master
         s_fits = build_fits(s_solid, s_emb.surface, s_model.space, s_ids, spec.fit)
         slave_surface = FittedSurface(index[spec.slave], s_fits, s_emb.surface, E / s_model.space.h)
-        if segmented:
-            rule = segmented_rule(s_solid, s_emb.grid, m_emb.grid, s_ids, {f.patch: f.surface for f in s_fits})
-        frames = slave_surface.slave_frames(rule)
+        frames = slave_surface.slave_frames(_slave_rule(spec, s_solid, s_emb, m_emb, s_ids, s_fits))
         master = FittedSurface(index[spec.master], build_fits(m_solid, m_emb.surface, m_model.space, m_ids, spec.fit),
                                m_emb.surface, E_m / m_model.space.h)
     else:
         s_fac, m_fac = s_emb.facets, m_emb.facets
         slave_srf = FacetSurface(s_model.space, s_fac.triangles, s_fac.element, np.isin(s_fac.patch, s_ids))
+        rule = _slave_rule(spec, s_solid, s_emb, m_emb, s_ids)
         frames = slave_srf.slave_frames(rule.piece, rule.uv, rule.w)
         master = FacetSurface(m_model.space, m_fac.triangles, m_fac.element, np.isin(m_fac.patch, m_ids))
     h = s_model.space.h

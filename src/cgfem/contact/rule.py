@@ -13,12 +13,12 @@ integrated (case option ``contact[].rule``).
   cut), for ``nurbs_fit`` on the slave's fitting net (so its knot lines split the surface
   too); every part, one (slave element, master element, Bezier piece) cell, is recombined
   to at most 27 points that keep its moments of the tensor polynomials of degree <= 2 per
-  variable (:func:`cgfem.embedding._column_kernels.recombine_groups`). On such a part both
+  variable (:func:`cgfem.embedding.reduce.reduced_surface`). On such a part both
   bodies' shape functions are trilinear, so their products are integrated exactly and the
   homogeneous state of the contact patch test is the discrete solution on any two grids
   (tests/test_contact_patch.py). The master's element faces are taken in the reference
-  configuration, where the two surfaces meet; a sliding master moves them, and the split
-  is exact again only where the motion is rigid or linear.
+  configuration, where the two surfaces meet: once the master slides along the slave, its
+  faces move off the split and a quadrature error returns, growing with the slip.
 """
 
 from __future__ import annotations
@@ -27,13 +27,11 @@ from typing import Mapping
 
 import numpy as np
 
-from cgfem.embedding import _column_kernels as _ck
 from cgfem.embedding.grid import CartesianGrid
 from cgfem.embedding.partition import SurfaceQuadrature, partition_surface
+from cgfem.embedding.reduce import reduced_surface
 from cgfem.geometry.nurbs import NurbsSurface
 from cgfem.geometry.solid import Patch, Solid
-
-RULES = ("boundary", "segmented")
 
 
 def segmented_rule(solid: Solid, grid: CartesianGrid, master_grid: CartesianGrid, patch_ids: np.ndarray,
@@ -46,20 +44,7 @@ def segmented_rule(solid: Solid, grid: CartesianGrid, master_grid: CartesianGrid
     patches = list(solid.patches)
     for ip, surface in (surfaces or {}).items():
         patches[int(ip)] = Patch(patches[int(ip)].name, surface)
-    wanted = {int(i) for i in patch_ids}
-    exact = partition_surface(Solid(tuple(patches)), grid, cut_by=master_grid, patches=wanted).surface
-    exact = exact.select(exact.w > 0.0)
+    exact = partition_surface(Solid(tuple(patches)), grid, cut_by=master_grid,
+                              patches={int(i) for i in patch_ids}).surface
     master = master_grid.element_id(master_grid.element_of_points(exact.x))
-    key = np.stack([exact.element, master, exact.patch, exact.piece])
-    order = np.lexsort(key[::-1])
-    key = key[:, order]
-    new = np.r_[True, np.any(key[:, 1:] != key[:, :-1], axis=0)] if order.size else np.zeros(0, bool)
-    starts = np.flatnonzero(new)
-    offsets = np.r_[starts, order.size].astype(np.int64)
-    centre = grid.element_center(grid.element_ijk(key[0, starts])) if order.size else np.zeros((0, 3))
-    w = np.zeros(order.size)
-    _ck.recombine_groups(np.ascontiguousarray(exact.x[order]), np.ascontiguousarray(exact.w[order]),
-                         np.ascontiguousarray(centre), 0.5 * grid.h, offsets, w)
-    kept = order[w > 0.0]
-    rule = exact.select(kept)
-    return SurfaceQuadrature(rule.patch, rule.uv, rule.x, w[w > 0.0], rule.normal, rule.element, rule.piece)
+    return reduced_surface(grid, exact, split=(master, exact.piece))

@@ -11,6 +11,7 @@ neighbouring elements meet exactly along the true intersection curves; the algor
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Collection
 
 import numpy as np
 
@@ -132,7 +133,8 @@ def _run_piece(net, grid: CartesianGrid, GX, GW, rule, capacity: int, cut_by: Ca
 
 def partition_surface(solid: Solid, grid: CartesianGrid, tol: float = DEFAULT_TOL,
                       min_points: int = MIN_POINTS, max_points: int = MAX_POINTS,
-                      cut_by: CartesianGrid | None = None, patches=None) -> SurfacePartition:
+                      cut_by: CartesianGrid | None = None,
+                      patches: Collection[int] | None = None) -> SurfacePartition:
     """Surface and grid-plane trimming quadratures of ``solid`` cut by ``grid``; ``tol`` is
     the target relative accuracy of each Gauss interval. ``cut_by``: a second grid whose
     planes also split the surface (its elements are not reported and its planes give no

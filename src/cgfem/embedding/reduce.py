@@ -17,6 +17,7 @@ the full rule's.
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Sequence
 
 import numpy as np
 
@@ -25,17 +26,20 @@ from cgfem.embedding.grid import CartesianGrid
 from cgfem.embedding.partition import SurfaceQuadrature
 
 
-def reduced_surface(grid: CartesianGrid, surface: SurfaceQuadrature) -> SurfaceQuadrature:
+def reduced_surface(grid: CartesianGrid, surface: SurfaceQuadrature,
+                    split: Sequence[np.ndarray] = ()) -> SurfaceQuadrature:
     """At most 27 points of ``surface`` per (element, patch), positive weights, the same
-    moments of polynomials of degree <= 2 in each variable (module docstring)."""
+    moments of polynomials of degree <= 2 in each variable (module docstring). ``split``:
+    further integer labels (n,) each that also separate the groups (e.g. the element of
+    another grid, :mod:`cgfem.contact.rule`); the moments stay those of ``grid``'s element."""
     rows = np.flatnonzero(surface.w > 0.0)
-    key = surface.element[rows] * (int(surface.patch.max(initial=0)) + 1) + surface.patch[rows]
-    by_key = np.argsort(key, kind="stable")
-    order, key = rows[by_key], key[by_key]
-    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]]) if key.size else np.zeros(0, np.int64)
-    offsets = np.r_[starts, key.size].astype(np.int64)
-    centre = grid.element_center(grid.element_ijk(surface.element[order[starts]])) if key.size \
-        else np.zeros((0, 3))
+    key = np.stack([surface.element[rows], surface.patch[rows], *(np.asarray(s)[rows] for s in split)])
+    by_key = np.lexsort(key[::-1])                      # stable: a group keeps its points' order
+    order, key = rows[by_key], key[:, by_key]
+    new = np.r_[True, np.any(key[:, 1:] != key[:, :-1], axis=0)] if order.size else np.zeros(0, bool)
+    starts = np.flatnonzero(new)
+    offsets = np.r_[starts, order.size].astype(np.int64)
+    centre = grid.element_center(grid.element_ijk(key[0, starts])) if order.size else np.zeros((0, 3))
     w = np.zeros(order.size)
     _k.recombine_groups(np.ascontiguousarray(surface.x[order]), np.ascontiguousarray(surface.w[order]),
                         np.ascontiguousarray(centre), 0.5 * grid.h, offsets, w)
