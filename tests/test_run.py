@@ -75,7 +75,8 @@ def test_run_writes_summary_and_steps(tmp_path, capsys):
     assert np.linalg.norm(ra + rb) < 1e-9 * np.linalg.norm(ra)
     assert rb[1] < 0 < ra[1]
     assert last["max_von_mises"]["link"] > 0 and last["newton_residuals"][-1] < last["newton_residuals"][0]
-    assert sorted(p.name for p in out.iterdir()) == ["step_001.vtu", "step_002.vtu", "summary.json",
+    assert sorted(p.name for p in out.iterdir()) == ["boundary_001.vtu", "boundary_002.vtu",
+                                                     "step_001.vtu", "step_002.vtu", "summary.json",
                                                      "surface_001.vtu", "surface_002.vtu"]
     mesh = meshio.read(out / "step_002.vtu")
     assert mesh.points.shape[0] == body["nodes"]
@@ -300,3 +301,50 @@ def test_surface_file_holds_the_boundary_rule_points(tmp_path):
         on = cloud.point_data["patch"] == index
         axis, side = "xyz".index(name[0]), float(name[1:] == "max")
         assert on.any() and np.abs(cloud.points[on, axis] - side).max() < 1e-12
+
+
+@pytest.mark.parametrize("surface", ["nurbs_fe", "facets"])
+def test_boundary_file_holds_the_fields_on_the_triangulated_boundary(tmp_path, surface):
+    """boundary_001.vtu: triangles on the body's boundary (the exact faces, or the facets)
+    whose vertices carry the step's nodal fields interpolated; with nurbs_fe, in this patch
+    test, the exact linear displacement, the uniform stress and its von Mises value, and
+    each vertex its patch."""
+    from elasticity_cases import uniform_stress_case
+    from cgfem.run import run_case
+
+    sigma = np.array([[3.0, 1.0, 0.5], [1.0, -2.0, 0.3], [0.5, 0.3, 1.0]]) * 1e6
+    case, eps = uniform_stress_case(sigma, 2.0e9, 0.3, (0.37, 0.61, 0.18))
+    assert run_case(case, 0, surface, tmp_path).status == "converged"
+    mesh = meshio.read(tmp_path / "boundary_001.vtu")
+    assert [c.type for c in mesh.cells] == ["triangle"]
+    x, tri = mesh.points, mesh.cells[0].data
+    assert np.array_equal(np.unique(tri), np.arange(x.shape[0]))
+    # closed and outward: the divergence theorem gives the volume the run integrated (the
+    # unit box's; with facets the chamfered polyhedron's), every vertex on the box
+    a, b, c = (x[tri[:, k]] for k in range(3))
+    volume = np.einsum("ij,ij->", (a + b + c) / 3.0, np.cross(b - a, c - a)) / 6.0
+    integrated = json.loads((tmp_path / "summary.json").read_text())["bodies"]["b"]["volume"]
+    assert volume == pytest.approx(integrated, rel=1e-10)
+    if surface == "nurbs_fe":
+        assert volume == pytest.approx(1.0, rel=1e-12)
+    assert np.all((x > -1e-12) & (x < 1.0 + 1e-12))
+    # the vertex fields are the step's nodal fields interpolated where the vertex lies
+    from cgfem.run import build_models
+
+    space = build_models(case, 0, surface, lambda m: None)[0][0].space
+    slots, xi = space.locate(x)
+    assert np.all(slots >= 0)
+    step = meshio.read(tmp_path / "step_001.vtu")
+    u, stress = mesh.point_data["displacement"], mesh.point_data["stress"]
+    for field, nodal in ((u, step.point_data["displacement"]), (stress, step.point_data["stress"])):
+        assert np.abs(field - space.interpolate(nodal, slots, xi)).max() <= 1e-14 * np.abs(nodal).max()
+    assert np.all(mesh.point_data["body"] == 0)
+    if surface == "nurbs_fe":  # facets do not pass the patch test (their chamfered corners)
+        assert np.abs(u - x @ eps.T).max() <= 1e-8 * np.abs(u).max()
+        assert np.abs(stress - sigma.ravel()).max() <= 1e-8 * np.abs(sigma).max()
+        dev = sigma - np.trace(sigma) / 3 * np.eye(3)
+        assert np.allclose(mesh.point_data["von_mises"], np.sqrt(1.5 * np.sum(dev * dev)), rtol=1e-8)
+        for index, name in enumerate(("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")):
+            on = mesh.point_data["patch"] == index
+            axis, side = "xyz".index(name[0]), float(name[1:] == "max")
+            assert on.any() and np.abs(x[on, axis] - side).max() < 1e-12

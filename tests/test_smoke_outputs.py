@@ -127,7 +127,7 @@ def test_every_step_has_its_files_and_the_contact_file_agrees(runs):
     its active points and force match the step's ``contact`` entry."""
     for run in runs:
         for number, step in enumerate(run.steps, start=1):
-            for name in (f"step_{number:03d}.vtu", f"surface_{number:03d}.vtu"):
+            for name in (f"step_{number:03d}.vtu", f"surface_{number:03d}.vtu", f"boundary_{number:03d}.vtu"):
                 assert (run.folder / name).stat().st_size > 0, run.folder / name
             if "contact" not in step:
                 continue

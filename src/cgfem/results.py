@@ -1,5 +1,5 @@
-"""Result files of a run: ``summary.json``, ``step_NNN.vtu`` and ``surface_NNN.vtu``
-(DESIGN.md contracts; README "Result files" lists every field).
+"""Result files of a run: ``summary.json``, ``step_NNN.vtu``, ``surface_NNN.vtu`` and
+``boundary_NNN.vtu`` (DESIGN.md contracts; README "Result files" lists every field).
 
 Every file is written to a hidden temporary name next to its target, flushed, then renamed
 onto it, so a reader never sees a partial file. ``summary.json`` is written last: a folder
@@ -34,7 +34,7 @@ def _jsonable(value):
 def clear_previous(folder: Path) -> None:
     """Remove the summary and step files an earlier run left in ``folder``."""
     folder = Path(folder)
-    for pattern in ("summary.json", "step_*.vtu", "surface_*.vtu", "contact_*.vtu"):
+    for pattern in ("summary.json", "step_*.vtu", "surface_*.vtu", "boundary_*.vtu", "contact_*.vtu"):
         for old in folder.glob(pattern):
             old.unlink()
 
@@ -85,14 +85,37 @@ def surface_mesh(bodies: list[dict]) -> meshio.Mesh:
     return point_cloud(np.concatenate(x), {k: np.concatenate(v) for k, v in point_data.items()})
 
 
+def boundary_mesh(bodies: list[dict]) -> meshio.Mesh:
+    """The triangulated boundary of every body (``boundary`` of each dict: ``points`` (n, 3)
+    at reference positions, ``triangles`` (m, 3), and at the vertices ``displacement``
+    (n, 3), ``stress`` (n, 3, 3, recovered Cauchy), ``von_mises`` (n,), ``patch`` (n,));
+    the point data adds ``body`` (n,), the body's index."""
+    x, triangles, point_data, shift = [], [], {}, 0
+    for index, b in enumerate(bodies):
+        s = b["boundary"]
+        x.append(np.asarray(s["points"], float).reshape(-1, 3))
+        triangles.append(np.asarray(s["triangles"], np.int64) + shift)
+        shift += x[-1].shape[0]
+        _append(point_data, "displacement", s["displacement"])
+        _append(point_data, "stress", np.asarray(s["stress"]).reshape(-1, 9))
+        _append(point_data, "von_mises", s["von_mises"])
+        _append(point_data, "body", np.full(x[-1].shape[0], index, np.int32))
+        _append(point_data, "patch", np.asarray(s["patch"], np.int32))
+    return meshio.Mesh(np.concatenate(x), [("triangle", np.concatenate(triangles))],
+                       point_data={k: np.concatenate(v) for k, v in point_data.items()})
+
+
 def _append(store: dict, key: str, value: np.ndarray) -> None:
     store.setdefault(key, []).append(np.asarray(value))
 
 
-def write_step(folder: Path, number: int, bodies: list[dict]) -> tuple[Path, Path]:
-    """Write ``step_NNN.vtu`` (:func:`step_mesh`) and ``surface_NNN.vtu``
-    (:func:`surface_mesh`) into ``folder``, atomically and together."""
+def write_step(folder: Path, number: int, bodies: list[dict]) -> list[Path]:
+    """Write ``step_NNN.vtu`` (:func:`step_mesh`), ``surface_NNN.vtu`` (:func:`surface_mesh`)
+    and, when every body has its ``boundary``, ``boundary_NNN.vtu`` (:func:`boundary_mesh`)
+    into ``folder``, atomically and together."""
     folder = Path(folder)
-    step, surface = folder / f"step_{number:03d}.vtu", folder / f"surface_{number:03d}.vtu"
-    write_vtu_files({step: step_mesh(bodies), surface: surface_mesh(bodies)})
-    return step, surface
+    files = {folder / f"step_{number:03d}.vtu": step_mesh(bodies),
+             folder / f"surface_{number:03d}.vtu": surface_mesh(bodies)}
+    if all(b.get("boundary") is not None for b in bodies):
+        files[folder / f"boundary_{number:03d}.vtu"] = boundary_mesh(bodies)
+    return write_vtu_files(files)

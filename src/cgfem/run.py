@@ -19,6 +19,7 @@ import numpy as np
 from cgfem import __version__
 from cgfem.case.model import SURFACES, Body, Case
 from cgfem.embedding.quadrature import Embedding, embed, grid_for
+from cgfem.embedding.tessellate import Tessellation, boundary_tessellation
 from cgfem.contact.assembly import summary as contact_summary
 from cgfem.contact.build import DEFINITIONS as CONTACT_DEFINITIONS, build_pair
 from cgfem.contact.fit import FIT_NAME_SEPARATOR, fit_mesh, write_fit_json, write_fit_vtu
@@ -160,7 +161,41 @@ def build_pairs(case: Case, models: list[BodyModel], solids: dict, surface: str,
     return pairs
 
 
-def step_outputs(model: BodyModel, u: np.ndarray, recovered: np.ndarray) -> dict:
+@dataclass(frozen=True)
+class BoundaryView:
+    """A body's triangulated boundary (:func:`boundary_tessellation`) with each vertex
+    located in an active element, to draw fields on the surface (``boundary_NNN.vtu``).
+    Triangles with a vertex in no active element are left out (none on the examples)."""
+
+    mesh: Tessellation
+    slots: np.ndarray
+    xi: np.ndarray
+
+    @classmethod
+    def of(cls, model: BodyModel, solid) -> "BoundaryView":
+        mesh = boundary_tessellation(solid, model.embedding)
+        slots, xi = model.space.locate(mesh.x)
+        lost = slots < 0
+        if lost.any():
+            keep = ~lost[mesh.triangles].any(axis=1)
+            used = np.zeros(lost.size, bool)
+            used[mesh.triangles[keep]] = True
+            number = np.cumsum(used) - 1
+            mesh = Tessellation(mesh.x[used], number[mesh.triangles[keep]], mesh.patch[used])
+            slots, xi = slots[used], xi[used]
+        return cls(mesh, slots, xi)
+
+    def fields(self, model: BodyModel, u: np.ndarray, nodal_cauchy: np.ndarray) -> dict:
+        """The mesh with the displacement, the recovered Cauchy stress and its von Mises
+        stress interpolated at the vertices."""
+        stress = model.space.interpolate(nodal_cauchy, self.slots, self.xi)
+        return {"points": self.mesh.x, "triangles": self.mesh.triangles, "patch": self.mesh.patch,
+                "displacement": model.space.interpolate(u.reshape(-1, 3), self.slots, self.xi),
+                "stress": stress, "von_mises": von_mises(stress)}
+
+
+def step_outputs(model: BodyModel, u: np.ndarray, recovered: np.ndarray,
+                 view: BoundaryView | None = None) -> dict:
     """Fields for the step files and scalars for the summary of one body at one step;
     ``recovered`` is the solver's recovery of ``u`` (the Cauchy stress in small strain).
 
@@ -170,7 +205,8 @@ def step_outputs(model: BodyModel, u: np.ndarray, recovered: np.ndarray) -> dict
     (per element) and ``max_von_mises`` (the body's maximum) are maxima of the von Mises
     stress of ``sigma*`` interpolated at material points only: the volume-rule points of
     inside elements and every boundary-rule point. ``surface`` holds the boundary-rule
-    points with ``displacement``, ``stress`` and ``von_mises`` interpolated there."""
+    points with ``displacement``, ``stress`` and ``von_mises`` interpolated there, and
+    ``boundary`` (if ``view`` is given) the same fields on the triangulated boundary."""
     space, el = model.space, model.elasticity
     nodal_cauchy = (spr.recover(model.recovery, model.cauchy(u, model.sampling_points()))
                     if model.finite else recovered)
@@ -197,7 +233,8 @@ def step_outputs(model: BodyModel, u: np.ndarray, recovered: np.ndarray) -> dict
             "stress": nodal_cauchy, "von_mises_nodal": vm_nodes, "status": status,
             "von_mises_max_qp": per_element, "max_von_mises": float(per_element.max(initial=0.0)),
             "von_mises_max_nodal": float(vm_nodes.max(initial=0.0)), "surface": surface,
-            "error_estimate": float(eta), "energy_norm": float(norm)}
+            "error_estimate": float(eta), "energy_norm": float(norm),
+            "boundary": view.fields(model, u, nodal_cauchy) if view is not None else None}
 
 
 def check_out(out: Path) -> list[Path]:
@@ -249,9 +286,10 @@ def run_case(case: Case, level: int, surface: str, out: Path,
         built = time.perf_counter()
         steps: list[dict] = []
         system = System(models, build_pairs(case, models, solids, surface, log))
+        views = [BoundaryView.of(m, solids[m.name]) for m in models]
         result = solve_static(system, case.steps, case.solver, log,
                               lambda record: steps.append(_write_step(out, system, record, len(steps) + 1,
-                                                                      log)))
+                                                                      views, log)))
     except InputError:
         _remove_created(created)
         raise
@@ -284,7 +322,7 @@ def _write_fits(out: Path, system: System, record: StepRecord, number: int) -> d
             for name, (b, V) in zip(names, fits)}
 
 
-def _write_step(out: Path, system: System, record: StepRecord, number: int,
+def _write_step(out: Path, system: System, record: StepRecord, number: int, views: list[BoundaryView],
                 log: Callable[[str], None]) -> dict:
     """Write the files of step ``number`` and return its entry of ``summary.json``."""
     models = system.bodies
@@ -301,7 +339,7 @@ def _write_step(out: Path, system: System, record: StepRecord, number: int,
         # element's extension past a grid face, extended_hits = 0)
         contact["extended_hits"] = record.extended_hits
         contact["continuous_residual"] = record.continuous_residual
-    outputs = [step_outputs(m, u, s) for m, u, s in zip(models, record.u, record.recovered)]
+    outputs = [step_outputs(m, u, s, v) for m, u, s, v in zip(models, record.u, record.recovered, views)]
     write_step(out, number, outputs)
     reactions = {}
     for m, u, s in zip(models, record.u, record.frozen_stress):

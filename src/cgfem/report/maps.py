@@ -2,8 +2,10 @@
 grid: sigma_y on chain2_steel (Fig. 14), |u| and the active contact points on chain2_rubber
 (Fig. 15), von Mises on the middle link of chain3 (Fig. 17).
 
-Fields are drawn on the boundary points of ``surface_NNN.vtu`` (the exact surface, which the
-active hexahedra overhang), warped by their displacement where the figure asks. Without a
+Fields are drawn on the triangulated boundary of ``boundary_NNN.vtu`` (the exact NURBS
+surface, or the facets, which the active hexahedra overhang), smoothly shaded and warped by
+the displacement where the figure asks; runs without that file are drawn as their cloud of
+boundary points. Without a
 display, VTK renders through EGL (``VTK_DEFAULT_OPENGL_WINDOW=vtkEGLRenderWindow``, set here
 only when ``DISPLAY`` is unset and the variable is not already set).
 """
@@ -28,19 +30,26 @@ if not os.environ.get("DISPLAY"):
 PANEL_PIXELS = (800, 600)
 
 
-def render_points(points: np.ndarray, values: np.ndarray, clim: tuple[float, float], cmap: str,
-                  extra: np.ndarray | None = None) -> np.ndarray:
-    """RGB image (rows, cols, 3) of a point cloud ``points`` (n, 3) coloured by ``values``
-    (n,) in ``clim``, with optional black ``extra`` points (m, 3) on top; isometric view."""
+def render(points: np.ndarray, values: np.ndarray, clim: tuple[float, float], cmap: str,
+           triangles: np.ndarray | None = None, extra: np.ndarray | None = None) -> np.ndarray:
+    """RGB image (rows, cols, 3) of the surface ``triangles`` (m, 3) on ``points`` (n, 3),
+    or of the points alone when ``triangles`` is None, coloured by ``values`` (n,) in
+    ``clim``, with optional black ``extra`` points (k, 3) on top; isometric view."""
     import pyvista as pv
 
     plotter = pv.Plotter(off_screen=True, window_size=PANEL_PIXELS)
     plotter.set_background("white")
-    plotter.add_points(pv.PolyData(np.asarray(points, float)), scalars=np.asarray(values, float),
-                       clim=clim, cmap=cmap, point_size=4.0, render_points_as_spheres=True,
-                       show_scalar_bar=False)
+    points, values = np.asarray(points, float), np.asarray(values, float)
+    if triangles is None:
+        plotter.add_points(pv.PolyData(points), scalars=values, clim=clim, cmap=cmap, point_size=4.0,
+                           render_points_as_spheres=True, show_scalar_bar=False)
+    else:
+        faces = np.hstack([np.full((len(triangles), 1), 3), np.asarray(triangles)]).ravel()
+        plotter.add_mesh(pv.PolyData(points, faces), scalars=values, clim=clim, cmap=cmap,
+                         smooth_shading=True, ambient=0.35, diffuse=0.65, specular=0.0,
+                         show_scalar_bar=False)
     if extra is not None and len(extra):
-        plotter.add_points(pv.PolyData(np.asarray(extra, float)), color="black", point_size=6.0,
+        plotter.add_points(pv.PolyData(np.asarray(extra, float)), color="black", point_size=5.0,
                            render_points_as_spheres=True)
     plotter.view_isometric()
     plotter.reset_camera()
@@ -75,26 +84,33 @@ def _title(run: Run) -> str:
     return f"{run.label} ({run.status_note})" if run.status_note else run.label
 
 
-def _cloud(run: Run, body: str | None = None, warp: bool = True):
-    """Points (n, 3), displacement (n, 3) and the mesh of the last step's boundary cloud,
-    restricted to ``body`` if given; points warped by the displacement if ``warp``."""
-    cloud = run.surface_points()
-    x = np.asarray(cloud.points, float)
-    u = np.asarray(cloud.point_data[DISPLACEMENT], float)
-    keep = np.ones(x.shape[0], bool)
+def _surface(run: Run, body: str | None = None, warp: bool = True):
+    """Points (n, 3), displacement (n, 3), point data and triangles (m, 3, or None for a
+    cloud) of the last step's boundary, restricted to ``body`` if given; points warped by the
+    displacement if ``warp``."""
+    mesh = run.boundary()
+    x = np.asarray(mesh.points, float)
+    u = np.asarray(mesh.point_data[DISPLACEMENT], float)
+    data = {k: np.asarray(v) for k, v in mesh.point_data.items()}
+    cells = {c.type: c.data for c in mesh.cells}
+    triangles = cells.get("triangle")
     if body is not None:
-        keep = np.asarray(cloud.point_data[BODY]).ravel() == run.body_index(body)
-    return (x + u if warp else x)[keep], u[keep], {k: np.asarray(v)[keep] for k, v in cloud.point_data.items()}
+        keep = data[BODY].ravel() == run.body_index(body)
+        x, u, data = x[keep], u[keep], {k: v[keep] for k, v in data.items()}
+        if triangles is not None:
+            number = np.cumsum(keep) - 1
+            triangles = number[triangles[keep[triangles].all(axis=1)]]
+    return (x + u if warp else x), u, data, triangles
 
 
 def fig14_stress_maps(summaries, component: tuple[int, int] = (1, 1)) -> Figure:
     """Cauchy stress ``sigma_ij`` (default sigma_yy) at the last converged step of every run
     on the deformed boundary, one panel per run, one colour scale."""
     runs = load_runs(summaries)
-    clouds = [_cloud(r) for r in runs]
-    values = [stress_component(c[2][STRESS], *component) for c in clouds]
+    surfaces = [_surface(r) for r in runs]
+    values = [stress_component(s[2][STRESS], *component) for s in surfaces]
     clim = _clim(values)
-    images = [render_points(c[0], v, clim, "coolwarm") for c, v in zip(clouds, values)]
+    images = [render(s[0], v, clim, "coolwarm", s[3]) for s, v in zip(surfaces, values)]
     name = "xyz"[component[0]] + "xyz"[component[1]]
     return image_grid(images, [_title(r) for r in runs], clim, "coolwarm", f"sigma_{name} (Pa)")
 
@@ -111,11 +127,11 @@ def fig15_deformed_shapes(summaries) -> Figure:
     """Deformed boundary coloured by |u| at the last step and the active contact points,
     one panel per run."""
     runs = load_runs(summaries)
-    clouds = [_cloud(r) for r in runs]
-    values = [np.linalg.norm(c[1], axis=1) for c in clouds]
+    surfaces = [_surface(r) for r in runs]
+    values = [np.linalg.norm(s[1], axis=1) for s in surfaces]
     clim = _clim(values)
     active = [active_contact_points(r) for r in runs]
-    images = [render_points(c[0], v, clim, "viridis", extra=a) for c, v, a in zip(clouds, values, active)]
+    images = [render(s[0], v, clim, "viridis", s[3], extra=a) for s, v, a in zip(surfaces, values, active)]
     titles = [f"{_title(r)}: {len(a)} active points" for r, a in zip(runs, active)]
     return image_grid(images, titles, clim, "viridis", "|u| (m)")
 
@@ -125,9 +141,9 @@ def fig17_von_mises(summaries, body: str) -> Figure:
     per run (two per row: facets beside nurbs_fe at each level), one colour scale; titles
     give the run's peak von Mises of that body."""
     runs = load_runs(summaries)
-    clouds = [_cloud(r, body, warp=False) for r in runs]
-    values = [np.asarray(c[2][VON_MISES], float).ravel() for c in clouds]
+    surfaces = [_surface(r, body, warp=False) for r in runs]
+    values = [np.asarray(s[2][VON_MISES], float).ravel() for s in surfaces]
     clim = _clim(values)
-    images = [render_points(c[0], v, clim, "jet") for c, v in zip(clouds, values)]
+    images = [render(s[0], v, clim, "jet", s[3]) for s, v in zip(surfaces, values)]
     titles = [f"{_title(r)}: peak {r.max_von_mises(body) / 1e6:.4g} MPa" for r in runs]
     return image_grid(images, titles, clim, "jet", f"von Mises on {body} (Pa)", max_cols=2)

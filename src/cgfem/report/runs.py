@@ -19,6 +19,7 @@ import numpy as np
 SUMMARY = "summary.json"
 STEP_VTU = "step_{:03d}.vtu"
 SURFACE_VTU = "surface_{:03d}.vtu"
+BOUNDARY_VTU = "boundary_{:03d}.vtu"
 CONTACT_VTU = "contact_{:03d}.vtu"
 
 #: point / cell data names of the VTU files
@@ -171,6 +172,13 @@ class Run:
     def surface_points(self, step: int = -1) -> meshio.Mesh:
         """The boundary points (reference positions) of a step."""
         return self._vtu(SURFACE_VTU, step)
+
+    def boundary(self, step: int = -1) -> meshio.Mesh:
+        """The triangulated boundary (reference positions) of a step, or, for runs written
+        before ``boundary_NNN.vtu`` existed, the cloud of boundary points."""
+        number = self.n_steps + 1 + step if step < 0 else step
+        path = self.folder / BOUNDARY_VTU.format(number)
+        return meshio.read(path) if path.exists() else self.surface_points(number)
 
     def contact_points(self, step: int = -1) -> meshio.Mesh:
         """The slave points of every pair of a step, at their current positions."""
