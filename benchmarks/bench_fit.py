@@ -8,12 +8,17 @@ time, time per Newton iteration and the peak resident memory. The last lines giv
 nurbs_fit / nurbs_fe measured in the same run (targets: time <= 3x, memory <= 2x, nonzeros
 per unknown within 20 %).
 
-    python3 benchmarks/bench_fit.py [levels ...]        # default: 1 2
+    python3 benchmarks/bench_fit.py [--parallel] [levels ...]        # default: 1 2
+
+``--parallel``: the two definitions of a level run at once, one thread each (2 cores: level 3
+takes about an hour per definition); both then share the machine alike, so their ratios
+still compare like with like, while their absolute times are those of a loaded machine.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -55,24 +60,36 @@ def one_run(level: int, surface: str, folder: Path) -> dict:
             "peak_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
 
 
-def main(levels: list[int]) -> None:
+def _child(level: int, surface: str, tmp: str, env: dict | None) -> subprocess.Popen:
+    code = (f"import json, sys; sys.path.insert(0, {str(REPO / 'benchmarks')!r}); import bench_fit; "
+            f"from pathlib import Path; print(json.dumps(bench_fit.one_run({level}, {surface!r}, Path({tmp!r}))))")
+    return subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=env)
+
+
+def main(levels: list[int], parallel: bool = False) -> None:
     rows = []
+    env = None
+    if parallel:
+        env = dict(os.environ, NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
     print(f"{'L':>2} {'surface':9} {'status':10} {'unknowns':>9} {'dofs':>8} {'nnz/unk':>8} {'LU/unk':>8} "
           f"{'newton':>6} {'solve s':>8} {'s/newton':>9} {'peak MiB':>9}", flush=True)
     for level in levels:
-        for surface in SURFACES:
-            with tempfile.TemporaryDirectory() as tmp:
-                code = (f"import json, sys; sys.path.insert(0, {str(REPO / 'benchmarks')!r}); import bench_fit; "
-                        f"from pathlib import Path; print(json.dumps(bench_fit.one_run({level}, {surface!r}, Path({tmp!r}))))")
-                out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
-                if out.returncode != 0:
-                    print(f"{level:>2} {surface:9} error: {out.stderr.strip().splitlines()[-1]}", flush=True)
+        groups = [SURFACES] if parallel else [(s,) for s in SURFACES]
+        for group in groups:
+            tmps = [tempfile.TemporaryDirectory() for _ in group]
+            children = [_child(level, surface, t.name, env) for surface, t in zip(group, tmps)]
+            for surface, child, tmp in zip(group, children, tmps):
+                stdout, stderr = child.communicate()
+                tmp.cleanup()
+                if child.returncode != 0:
+                    print(f"{level:>2} {surface:9} error: {(stderr.strip().splitlines() or ['?'])[-1]}", flush=True)
                     continue
-                r = json.loads(out.stdout.strip().splitlines()[-1])
-            rows.append(r)
-            print(f"{level:>2} {surface:9} {r['status']:10} {r['unknowns']:>9} {r['dofs']:>8} "
-                  f"{r['nnz_per_unknown']:>8.1f} {r['factor_nnz_per_unknown']:>8.1f} {r['newton']:>6} "
-                  f"{r['solve_s']:>8.1f} {r['s_per_newton']:>9.2f} {r['peak_mib']:>9.0f}", flush=True)
+                r = json.loads(stdout.strip().splitlines()[-1])
+                rows.append(r)
+                print(f"{level:>2} {surface:9} {r['status']:10} {r['unknowns']:>9} {r['dofs']:>8} "
+                      f"{r['nnz_per_unknown']:>8.1f} {r['factor_nnz_per_unknown']:>8.1f} {r['newton']:>6} "
+                      f"{r['solve_s']:>8.1f} {r['s_per_newton']:>9.2f} {r['peak_mib']:>9.0f}", flush=True)
     print("\nratios nurbs_fit / nurbs_fe (targets: time <= 3, memory <= 2, nnz per unknown <= 1.2):")
     for level in levels:
         pair = {r["surface"]: r for r in rows if r["level"] == level}
@@ -85,4 +102,5 @@ def main(levels: list[int]) -> None:
 
 
 if __name__ == "__main__":
-    main([int(a) for a in sys.argv[1:]] or [1, 2])
+    args = sys.argv[1:]
+    main([int(a) for a in args if a != "--parallel"] or [1, 2], parallel="--parallel" in args)

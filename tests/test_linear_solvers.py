@@ -276,3 +276,23 @@ def test_bad_input(cube) -> None:
         factorize(K[:-1])
     with pytest.raises(ValueError, match="square"):
         factorize(K.toarray())
+
+
+@pytest.mark.parametrize("symmetric", [True, False])
+def test_pyamg_stops_at_a_looser_per_solve_tolerance(symmetric: bool, cube) -> None:
+    """solve(b, rtol): the true residual reaches the looser rtol in fewer Krylov iterations;
+    a tighter one than the solver's own is not taken (its own still holds), and direct
+    backends solve to round-off whatever rtol asks."""
+    K, f, B, _ = cube
+    solver = factorize(K, backend="pyamg", symmetric=symmetric, near_null=B, rtol=1e-12)
+    solver.solve(f)
+    solver.solve(f, 1e-4)
+    solver.solve(f, 1e-16)
+    tight, loose, tighter = solver.info["iterations"]
+    r_tight, r_loose, r_tighter = solver.info["residuals"]
+    assert r_tight <= 1e-12 and r_loose <= 1e-4 and r_tighter <= 1e-12
+    assert loose < 0.6 * tight and tighter == tight
+    for backend in DIRECT:
+        direct = factorize(K, backend=backend)
+        direct.solve(f, 1e-2)
+        assert direct.info["residuals"][0] < 1e-13

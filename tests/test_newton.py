@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from cgfem.solve.newton import NONMONOTONE, newton, observed_order
 
@@ -75,3 +76,32 @@ def test_nonmonotone_fallback_reuses_the_monotone_trials():
     assert res.converged and res.u[0] == 0.0
     np.testing.assert_allclose(res.residuals, [10.0, 5.0, 7.5, 0.0])
     assert len(calls) == 11
+
+
+def test_inexact_newton_asks_for_the_forcing_tolerance_and_still_converges():
+    """forcing: each linear solve is asked for eta = forcing tol ref / |r| (at most forcing);
+    a solver that returns exactly that relative error still converges to tol, with the
+    residual after the last step below tol."""
+    from cgfem.solve.newton import forcing_rtol
+
+    A = np.array([[4.0, 1.0, 0.0], [1.0, 3.0, 0.5], [0.0, 0.5, 2.0]])
+    target = np.array([0.3, -0.2, 0.5])
+
+    def assemble(u, tangent):
+        r = A @ u + 0.1 * u ** 3 - (A @ target + 0.1 * target ** 3)
+        return r, (A + np.diag(0.3 * u ** 2)) if tangent else None
+    asked, norms = [], []
+
+    def inexact(K, b, rtol):
+        asked.append(rtol)
+        norms.append(np.linalg.norm(b))
+        x = np.linalg.solve(K, b)
+        e = np.linalg.solve(K, np.array([1.0, -1.0, 1.0]))   # perturb: residual exactly rtol |b|
+        return x + e * rtol * np.linalg.norm(b) / np.linalg.norm(K @ e)
+    tol, reference = 1e-10, 10.0
+    res = newton(assemble, np.zeros(3), inexact, tol=tol, reference=reference, max_iter=30, forcing=0.1)
+    assert res.converged and res.residuals[-1] <= tol * res.reference
+    assert np.allclose(asked, [forcing_rtol(0.1, tol, res.reference, n) for n in norms])
+    assert asked[0] == pytest.approx(0.1 * tol * res.reference / norms[0]) and max(asked) <= 0.1
+    assert asked[-1] > 1e3 * asked[0]   # the last solves stop many digits earlier
+    assert np.abs(res.u - target).max() < 1e-9

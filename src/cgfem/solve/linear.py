@@ -127,8 +127,10 @@ class LinearSolver:
         self.info: dict[str, Any] = {"backend": self.backend, "n": n, "setup_s": 0.0,
                                      "solve_s": 0.0, "iterations": [], "residuals": []}
 
-    def solve(self, b: np.ndarray) -> np.ndarray:
-        """The solution of ``A x = b`` for ``b`` of shape (n,)."""
+    def solve(self, b: np.ndarray, rtol: float | None = None) -> np.ndarray:
+        """The solution of ``A x = b`` for ``b`` of shape (n,). ``rtol``: the relative
+        residual this solve may stop at when it is looser than the solver's own (iterative
+        backends, for inexact Newton; direct backends always solve to round-off)."""
         b = np.asarray(b, dtype=np.float64)
         if b.shape != (self.n,):
             raise ValueError(f"right-hand side must have shape ({self.n},), got {b.shape}")
@@ -139,13 +141,13 @@ class LinearSolver:
         if norm_b == 0.0:
             x, iterations, residual = np.zeros(self.n), 0, 0.0
         else:
-            x, iterations, residual = self._solve(b, norm_b)
+            x, iterations, residual = self._solve(b, norm_b, rtol)
         self.info["solve_s"] += time.perf_counter() - t0
         self.info["iterations"].append(iterations)
         self.info["residuals"].append(residual)
         return x
 
-    def _solve(self, b: np.ndarray, norm_b: float) -> tuple[np.ndarray, int, float]:
+    def _solve(self, b: np.ndarray, norm_b: float, rtol: float | None) -> tuple[np.ndarray, int, float]:
         """(x, iterations, true relative residual) for ``b != 0``."""
         raise NotImplementedError
 
@@ -156,7 +158,7 @@ class _DirectSolver(LinearSolver):
     _apply: Callable[[np.ndarray], np.ndarray]
     _matvec: Callable[[np.ndarray], np.ndarray]
 
-    def _solve(self, b: np.ndarray, norm_b: float) -> tuple[np.ndarray, int, float]:
+    def _solve(self, b: np.ndarray, norm_b: float, rtol: float | None) -> tuple[np.ndarray, int, float]:
         x = self._apply(b)
         for step in range(3):
             if not np.all(np.isfinite(x)):
@@ -270,8 +272,9 @@ class _AMG(LinearSolver):
         self.info.update(krylov="cg" if symmetric else "gmres", levels=len(self._ml.levels),
                          operator_complexity=float(self._ml.operator_complexity()))
 
-    def _solve(self, b: np.ndarray, norm_b: float) -> tuple[np.ndarray, int, float]:
-        bs, y, tol, residual = self._s * b, None, self._rtol, np.inf
+    def _solve(self, b: np.ndarray, norm_b: float, rtol: float | None) -> tuple[np.ndarray, int, float]:
+        target = self._rtol if rtol is None else max(self._rtol, rtol)
+        bs, y, tol, residual = self._s * b, None, target, np.inf
         calls: list[int] = []
         for _ in range(4):  # tighten the scaled tolerance until the true residual is met
             left = MAX_ITERATIONS - len(calls)
@@ -288,11 +291,11 @@ class _AMG(LinearSolver):
                 raise LinearSolverError(f"pyamg: Krylov breakdown (flag {flag}) or NaN")
             # the true residual b - A x = S^-1 (S b - S A S y)
             residual = float(np.linalg.norm((bs - self._As @ y) / self._s)) / norm_b
-            if residual <= self._rtol:
+            if residual <= target:
                 return self._s * y, len(calls), residual
-            tol = max(tol * 0.5 * self._rtol / residual, np.finfo(float).eps)
+            tol = max(tol * 0.5 * target / residual, np.finfo(float).eps)
         method = "CG" if self._symmetric else "GMRES"
-        raise LinearSolverError(f"pyamg: {method} did not reach relative residual {self._rtol:g} "
+        raise LinearSolverError(f"pyamg: {method} did not reach relative residual {target:g} "
                                 f"in {len(calls)} iterations (reached {residual:.2e})")
 
 

@@ -108,8 +108,9 @@ class ReducedSaddleSolver(LinearSolver):
     def _scales(self) -> np.ndarray:
         return np.concatenate([np.full(c.z.size, c.scale) for c in self.constraints])
 
-    def _solve(self, b: np.ndarray, norm_b: float) -> tuple[np.ndarray, int, float]:
+    def _solve(self, b: np.ndarray, norm_b: float, rtol: float | None) -> tuple[np.ndarray, int, float]:
         n_u, z = self.n_u, self._z
+        target = self.rtol if rtol is None else max(self.rtol, rtol)
         mu = np.concatenate([c.mu for c in self.constraints])
         s = self._scales()
         b_u, b_Z, b_mu = b[:n_u], b[z], b[mu]
@@ -129,17 +130,17 @@ class ReducedSaddleSolver(LinearSolver):
         if norm_rhs == 0.0:
             u = np.zeros(n_u)
         elif self.symmetric:
-            u, info = spla.cg(S, rhs, rtol=self.rtol, atol=0.0, maxiter=self.max_iterations, M=Pinv,
+            u, info = spla.cg(S, rhs, rtol=target, atol=0.0, maxiter=self.max_iterations, M=Pinv,
                               callback=callback)
         else:
-            u, info = spla.gmres(S, rhs, rtol=self.rtol, atol=0.0, restart=50, maxiter=self.max_iterations,
+            u, info = spla.gmres(S, rhs, rtol=target, atol=0.0, restart=50, maxiter=self.max_iterations,
                                  M=Pinv, callback=callback, callback_type="pr_norm")
         Z = w + self._C(u)
         mu_x = self._Minv(b_Z - self.Kc @ Z) / s
         x = np.zeros(self.n)
         x[:n_u], x[z], x[mu] = u, Z, mu_x
         residual = float(np.linalg.norm(b - self._matvec(x))) / norm_b if norm_b > 0.0 else 0.0
-        if not np.isfinite(residual) or residual > max(10.0 * self.rtol, 1e-8):
+        if not np.isfinite(residual) or residual > max(10.0 * target, 1e-8):
             raise LinearSolverError(f"saddle-amg: reached relative residual {residual:.2e} in {count[0]} "
                                     f"Krylov iterations")
         return x, count[0], residual

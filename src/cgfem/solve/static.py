@@ -276,12 +276,12 @@ class _Solver:
         self._key, self._factor = None, None
         self.frozen = False
 
-    def __call__(self, K: sp.csr_matrix, b: np.ndarray) -> np.ndarray:
+    def __call__(self, K: sp.csr_matrix, b: np.ndarray, rtol: float | None = None) -> np.ndarray:
         if self._key is not K and not (self.frozen and self._factor is not None):
             self._factor = factorize(K, backend=self.backend, symmetric=self.symmetric,
                                      near_null=self.near_null, indefinite=self.indefinite, saddle=self.saddle)
             self._key = K
-        return self._factor.solve(b)
+        return self._factor.solve(b, rtol)
 
 
 def relative_change(new: list[np.ndarray], old: list[np.ndarray | None]) -> float:
@@ -335,6 +335,9 @@ FREE_MODE = 1e-10
 FLOATING_STEP = 1.0
 #: relax the outer loop's fixed point (:class:`Relaxation`); False: plain substitution
 ACCELERATE = True
+#: inexact Newton's forcing factor (:func:`cgfem.solve.newton.newton`): iterative linear
+#: solves stop at this fraction of Newton's tolerance over the current residual
+FORCING = 0.1
 
 
 def shift_factor(norm: float, largest: float) -> float:
@@ -435,7 +438,7 @@ def _solve_increment(system: System, solver: _Solver, u0: np.ndarray,
             tic = time.perf_counter()
             result = newton(assemble, u, solver, tol=options.newton_tol, reference=reference,
                             max_iter=MODIFIED_NEWTON_ITERATIONS if fixed_tangent else options.max_newton,
-                            fixed_tangent=fixed_tangent, limit=system.step_limit,
+                            fixed_tangent=fixed_tangent, limit=system.step_limit, forcing=FORCING,
                             log=lambda k, r: log(f"t={t:.4g} pass {outer} newton {k}: "
                                                  f"|r|/ref={r:.3e}  ({time.perf_counter() - tic:.2f} s)"))
             solver.frozen = False
