@@ -78,9 +78,16 @@ class ReducedSaddleSolver(LinearSolver):
         if np.any(d == 0.0):
             raise LinearSolverError("saddle-amg: zero diagonal entries in the reduced matrix")
         self._s = 1.0 / np.sqrt(d)
-        Ps = sp.diags(self._s) @ P @ sp.diags(self._s)
+        Ps = (sp.diags(self._s) @ P @ sp.diags(self._s)).tocsr()
         B = None if near_null is None else near_null[:n_u] / self._s[:, None]
-        self._ml = pyamg.smoothed_aggregation_solver(Ps.tocsr(), B=B, symmetry="hermitian" if symmetric else "nonsymmetric")
+        # as for the bodies' own matrices (cgfem.solve.linear): nodal 3x3 blocks, and the
+        # given near-null space taken as it is (improving it costs relaxation sweeps on all
+        # six modes on every level)
+        if n_u % 3 == 0:
+            Ps = Ps.tobsr(blocksize=(3, 3))
+        kwargs = {"improve_candidates": None} if B is not None else {}
+        self._ml = pyamg.smoothed_aggregation_solver(Ps, B=B, symmetry="hermitian" if symmetric else "nonsymmetric",
+                                                     **kwargs)
 
     def _lumped(self, c: FitConstraint) -> sp.csr_matrix:
         """``D^-1 G`` per component on the global body columns: (3 m, n_u)."""
