@@ -438,3 +438,11 @@ def test_contact_points_are_drawn_where_the_file_puts_them(tmp_path):
     np.testing.assert_array_equal(active_contact_points(run), np.asarray(cloud.points)[:4])
     np.testing.assert_allclose(run.contact_force(), [0.0, 1.0, 0.0])
     np.testing.assert_allclose(run.contact_force(pair="link_b/link_a"), [0.0, 1.0, 0.0])
+
+
+def test_centred_colour_values_keep_zero_in_the_middle():
+    """fig14's diverging map: each sign scaled to its own extreme, zero at the centre."""
+    from cgfem.report.maps import centred
+
+    v = np.array([-20.0, -10.0, 0.0, 4.5, 9.0])
+    assert np.allclose(centred(v, (-20.0, 9.0)), [-1.0, -0.5, 0.0, 0.5, 1.0])

@@ -17,7 +17,7 @@ import os
 
 import numpy as np
 from matplotlib.cm import ScalarMappable
-from matplotlib.colors import Normalize
+from matplotlib.colors import Normalize, TwoSlopeNorm
 from matplotlib.figure import Figure
 
 from cgfem.report.runs import ACTIVE, BODY, DISPLACEMENT, STRESS, VON_MISES, Run, load_runs, stress_component
@@ -58,9 +58,19 @@ def render(points: np.ndarray, values: np.ndarray, clim: tuple[float, float], cm
     return np.asarray(image)
 
 
+def centred(values: np.ndarray, clim: tuple[float, float]) -> np.ndarray:
+    """``values`` mapped onto [-1, 1] linearly on each side of zero (``clim[0] -> -1``,
+    ``0 -> 0``, ``clim[1] -> 1``), for a diverging colour map centred on zero however
+    unequal the two extremes; ``clim`` must straddle zero."""
+    lo, hi = clim
+    v = np.asarray(values, float)
+    return np.where(v < 0.0, v / -lo, v / hi)
+
+
 def image_grid(images: list[np.ndarray], titles: list[str], clim: tuple[float, float], cmap: str,
-               label: str, max_cols: int = 3) -> Figure:
-    """Panels of rendered images with titles and one shared colour bar for ``clim``."""
+               label: str, max_cols: int = 3, zero_centred: bool = False) -> Figure:
+    """Panels of rendered images with titles and one shared colour bar for ``clim``
+    (``zero_centred``: the images were coloured by :func:`centred` values)."""
     n_cols = min(max_cols, len(images))
     n_rows = math.ceil(len(images) / n_cols)
     fig, axes = new_figure(n_rows, n_cols, width=2.4 * n_cols + 0.8, height=2.0)
@@ -69,7 +79,8 @@ def image_grid(images: list[np.ndarray], titles: list[str], clim: tuple[float, f
     for ax, image, title in zip(axes.ravel(), images, titles):
         ax.imshow(image)
         ax.set_title(title)
-    mappable = ScalarMappable(Normalize(*clim), cmap)
+    norm = TwoSlopeNorm(0.0, *clim) if zero_centred else Normalize(*clim)
+    mappable = ScalarMappable(norm, cmap)
     fig.colorbar(mappable, ax=axes.ravel().tolist(), label=label, shrink=0.8)
     return fig
 
@@ -105,13 +116,18 @@ def _surface(run: Run, body: str | None = None, warp: bool = True):
 
 def fig14_stress_maps(summaries, component: tuple[int, int] = (1, 1)) -> Figure:
     """Cauchy stress ``sigma_ij`` (default sigma_yy) at the last converged step of every run
-    on the deformed boundary, one panel per run, one colour scale."""
+    on the deformed boundary, one panel per run, one colour scale, white at zero when the
+    values take both signs (each side scaled to its own extreme)."""
     runs = load_runs(summaries)
     surfaces = [_surface(r) for r in runs]
     values = [stress_component(s[2][STRESS], *component) for s in surfaces]
     clim = _clim(values)
-    images = [render(s[0], v, clim, "coolwarm", s[3]) for s, v in zip(surfaces, values)]
     name = "xyz"[component[0]] + "xyz"[component[1]]
+    if clim[0] < 0.0 < clim[1]:   # compression blue, tension red, zero white
+        images = [render(s[0], centred(v, clim), (-1.0, 1.0), "coolwarm", s[3]) for s, v in zip(surfaces, values)]
+        return image_grid(images, [_title(r) for r in runs], clim, "coolwarm", f"sigma_{name} (Pa)",
+                          zero_centred=True)
+    images = [render(s[0], v, clim, "coolwarm", s[3]) for s, v in zip(surfaces, values)]
     return image_grid(images, [_title(r) for r in runs], clim, "coolwarm", f"sigma_{name} (Pa)")
 
 
