@@ -137,18 +137,25 @@ def fig13_reactions(summaries, pulled: str, clamped: str, component: str = "y") 
 
 
 def fig_newton_residuals(summaries) -> Figure:
-    """Relative Newton residual of every iteration of every run, one panel per example."""
-    runs = load_runs(summaries)
+    """Relative Newton residual of every iteration (all outer passes) of the last converged
+    load step of every run, one panel per example, two per row, each legend beside its
+    panel. (All steps in a row would draw one hairball per example: chain2_rubber takes
+    15 steps of about 12 iterations.)"""
+    runs = [r for r in load_runs(summaries) if r.steps]
     cases = sorted({r.case for r in runs})
-    fig, axes = new_figure(1, len(cases), width=3.0 * len(cases), height=2.8)
-    for ax, case in zip(axes[0], cases):
+    n_cols = min(2, len(cases))
+    n_rows = -(-len(cases) // n_cols)
+    fig, axes = new_figure(n_rows, n_cols, width=7.0, height=2.6)
+    for ax in axes.ravel()[len(cases):]:
+        ax.set_axis_off()
+    for ax, case in zip(axes.ravel(), cases):
         for run in (r for r in runs if r.case == case):
-            res = run.newton_residuals()
+            res = run.newton_residuals(step=-1)
             ax.semilogy(np.arange(res.size), res, label=_label(run),
                         **{**_style(run), "linewidth": 0.8, "markersize": 2})
-        ax.set(title=case, xlabel="Newton iteration (all steps and passes)",
+        ax.set(title=f"{case}: last converged step", xlabel="Newton iteration (all outer passes)",
                ylabel="relative residual")
-        ax.legend(ncol=2)
+        ax.legend(fontsize=5, loc="center left", bbox_to_anchor=(1.0, 0.5), frameon=False)
     return fig
 
 

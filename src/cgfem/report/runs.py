@@ -140,12 +140,12 @@ class Run:
         (``body/patch+patch``) at every converged step."""
         return np.array([s["reactions"][key] for s in self.steps], float).reshape(-1, 3)
 
-    def newton_residuals(self) -> np.ndarray:
-        """Newton residual norms of every pass of every step, in order (all iterations), each
-        relative to the first residual of its step (summary.json stores norms in N; the
-        solver's own reference, printed as ``|r|/ref`` in the run log, is not stored)."""
+    def newton_residuals(self, step: int | None = None) -> np.ndarray:
+        """Newton residual norms of every pass of every step (or of step ``step`` alone, an
+        index into the converged steps), in order (all iterations), each relative to the
+        first residual of its step (summary.json stores norms in N)."""
         values: list[float] = []
-        for s in self.steps:
+        for s in (self.steps if step is None else [self.steps[step]]):
             passes = s.get("pass_residuals") or [s["newton_residuals"]]
             first = float(passes[0][0]) or 1.0
             for residuals in passes:
