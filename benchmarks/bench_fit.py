@@ -42,7 +42,9 @@ def one_run(level: int, surface: str, folder: Path) -> dict:
 
     def counting(A, **kwargs):
         solver = factorize(A, **kwargs)
-        matrices.append({"n": int(A.shape[0]), "nnz": int(A.nnz), "factor_nnz": int(solver.info.get("factor_nnz", 0)),
+        # the reduced saddle solver factorizes its reduced matrix, not A
+        n, nnz = solver.info.get("factorized_n", A.shape[0]), solver.info.get("factorized_nnz", A.nnz)
+        matrices.append({"n": int(n), "nnz": int(nnz), "factor_nnz": int(solver.info.get("factor_nnz", 0)),
                          "backend": solver.backend})
         return solver
 

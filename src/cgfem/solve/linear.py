@@ -49,8 +49,9 @@ import scipy.sparse.linalg as spla
 
 BACKENDS = ("superlu", "pyamg", "pardiso")
 PARDISO_MAX_DOFS = 100_000  #: largest symmetric system ``auto`` sends to pardiso
-#: largest symmetric saddle point factorized (pardiso's non-symmetric type: planar nurbs_fit
-#: at 69k unknowns peaked at 3.8 GB, at 470k it passed 23 GB and was killed)
+#: largest saddle point factorized whole (pardiso's non-symmetric type: planar nurbs_fit at
+#: 69k unknowns peaked at 3.8 GB, at 470k it passed 23 GB and was killed; chain2_steel at
+#: level 3, 171k body dofs, was killed at 14 GB where nurbs_fe peaks at 7 GB)
 SADDLE_MAX_DOFS = 150_000
 SUPERLU_MAX_DOFS = 10_000  #: largest symmetric system ``auto`` sends to superlu (no pardiso)
 DIRECT_CHECK = 1e-8  #: relative residual a direct solve must reach
@@ -306,17 +307,21 @@ def factorize(A: sp.spmatrix, *, backend: str = "auto", symmetric: bool = True,
     ``A``. ``near_null`` (e.g. :func:`rigid_body_modes`) and ``rtol`` (relative residual)
     serve pyamg only; ``indefinite``: a saddle-point matrix (:func:`choose_backend`).
     ``saddle``: ``(n_u, constraints)`` of nurbs_fit's saddle point
-    (:mod:`cgfem.solve.saddle`): with ``auto``, a symmetric one above
-    :data:`SADDLE_MAX_DOFS` is solved on the bodies' dofs by AMG-preconditioned CG. Raises :class:`LinearSolverError` on a singular or non-finite matrix,
+    (:mod:`cgfem.solve.saddle`): with ``auto``, one above :data:`SADDLE_MAX_DOFS` is solved
+    on the bodies' dofs, by AMG-preconditioned CG if symmetric, else by GMRES preconditioned
+    by the factorized reduced matrix. Raises :class:`LinearSolverError` on a singular or non-finite matrix,
     ``ValueError`` on a bad backend name or shape."""
     if not sp.issparse(A) or A.ndim != 2 or A.shape[0] != A.shape[1]:
         raise ValueError(f"A must be a square sparse matrix, got {type(A).__name__} "
                          f"of shape {getattr(A, 'shape', None)}")
     name = choose_backend(A.shape[0], symmetric, backend, indefinite)
-    if indefinite and symmetric and A.shape[0] > SADDLE_MAX_DOFS and saddle is not None and backend == "auto":
+    if indefinite and A.shape[0] > SADDLE_MAX_DOFS and saddle is not None and backend == "auto":
         from cgfem.solve.saddle import reduced_saddle
+        # symmetric: AMG-preconditioned CG; non-symmetric: GMRES on the reduced matrix
+        # factorized like the bodies' own (AMG is weak on non-symmetric systems)
+        preconditioner = "amg" if symmetric else choose_backend(saddle[0], False)
         return reduced_saddle(sp.csr_matrix(A, dtype=np.float64), saddle[0], saddle[1], symmetric, near_null,
-                              max(rtol, 1e-10))
+                              max(rtol, 1e-10), preconditioner=preconditioner)
     if indefinite and symmetric and A.shape[0] > SADDLE_MAX_DOFS:
         raise LinearSolverError(f"{name}: a symmetric saddle-point system of {A.shape[0]} unknowns "
                                 f"(above {SADDLE_MAX_DOFS}) would not fit in memory factorized, and "

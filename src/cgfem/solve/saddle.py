@@ -17,9 +17,11 @@ eliminated exactly for a given ``u``::
 
 and the reduced operator ``S`` (dense over a contact surface if formed: it never is) is
 applied matrix-free in a Krylov solver (CG when the system is symmetric, else GMRES)
-preconditioned by smoothed-aggregation AMG of the sparse ``K + C~^T Kc C~``, with ``C~`` the
-fit with a lumped ``M`` (row sums; non-negative B-spline bases make them positive), which is
-spectrally close to ``C``.
+preconditioned by the sparse ``P = K + C~^T Kc C~``, with ``C~`` the fit with a lumped ``M``
+(row sums; non-negative B-spline bases make them positive), which is spectrally close to
+``C``: one V-cycle of smoothed-aggregation AMG of ``P`` (``preconditioner="amg"``), or ``P``
+factorized by a direct backend (``"pardiso"``, ``"superlu"``), which needs the memory of the
+bodies' own factorization instead of the whole saddle point's.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from cgfem.solve.linear import LinearSolver, LinearSolverError
+from cgfem.solve.linear import LinearSolver, LinearSolverError, factorize
 
 
 @dataclass(frozen=True)
@@ -57,10 +59,13 @@ class ReducedSaddleSolver(LinearSolver):
     backend = "saddle-amg"
 
     def __init__(self, A: sp.csr_matrix, n_u: int, constraints: list[FitConstraint], symmetric: bool,
-                 near_null: np.ndarray | None, rtol: float = 1e-10, max_iterations: int = 1000) -> None:
+                 near_null: np.ndarray | None, rtol: float = 1e-10, max_iterations: int = 1000,
+                 preconditioner: str = "amg") -> None:
         import pyamg
 
         super().__init__(A.shape[0])
+        if preconditioner != "amg":
+            self.backend = f"saddle-{preconditioner}"
         A = sp.csr_matrix(A)
         self.n_u, self.constraints, self.symmetric = n_u, constraints, symmetric
         self.rtol, self.max_iterations = rtol, max_iterations
@@ -76,18 +81,26 @@ class ReducedSaddleSolver(LinearSolver):
             P = (0.5 * (P + P.T)).tocsr()
         d = np.abs(P.diagonal())
         if np.any(d == 0.0):
-            raise LinearSolverError("saddle-amg: zero diagonal entries in the reduced matrix")
-        self._s = 1.0 / np.sqrt(d)
-        Ps = (sp.diags(self._s) @ P @ sp.diags(self._s)).tocsr()
-        B = None if near_null is None else near_null[:n_u] / self._s[:, None]
+            raise LinearSolverError(f"{self.backend}: zero diagonal entries in the reduced matrix")
+        # what is factorized (or coarsened): the reduced matrix, n_u x n_u
+        self.info.update(factorized_n=int(n_u), factorized_nnz=int(P.nnz))
+        if preconditioner != "amg":
+            factor = factorize(P, backend=preconditioner, symmetric=symmetric)
+            self.info["factor_nnz"] = int(factor.info.get("factor_nnz", 0))
+            self._precondition = factor.solve
+            return
+        s = 1.0 / np.sqrt(d)
+        Ps = (sp.diags(s) @ P @ sp.diags(s)).tocsr()
+        B = None if near_null is None else near_null[:n_u] / s[:, None]
         # as for the bodies' own matrices (cgfem.solve.linear): nodal 3x3 blocks, and the
         # given near-null space taken as it is (improving it costs relaxation sweeps on all
         # six modes on every level)
         if n_u % 3 == 0:
             Ps = Ps.tobsr(blocksize=(3, 3))
         kwargs = {"improve_candidates": None} if B is not None else {}
-        self._ml = pyamg.smoothed_aggregation_solver(Ps, B=B, symmetry="hermitian" if symmetric else "nonsymmetric",
-                                                     **kwargs)
+        ml = pyamg.smoothed_aggregation_solver(Ps, B=B, symmetry="hermitian" if symmetric else "nonsymmetric",
+                                               **kwargs)
+        self._precondition = lambda r: s * ml.solve(s * r, tol=1e-8, maxiter=1, cycle="V")
 
     def _lumped(self, c: FitConstraint) -> sp.csr_matrix:
         """``D^-1 G`` per component on the global body columns: (3 m, n_u)."""
@@ -124,11 +137,7 @@ class ReducedSaddleSolver(LinearSolver):
         w = self._Minv(b_mu / s)                                    # M^-1 b_mu / s
         rhs = b_u + self._Ct(b_Z) - self._Ct(self.Kc @ w)
         S = spla.LinearOperator((n_u, n_u), matvec=lambda v: self.K @ v + self._Ct(self.Kc @ self._C(v)))
-        scale = self._s
-
-        def precondition(r):
-            return scale * self._ml.solve(scale * r, tol=1e-8, maxiter=1, cycle="V")
-        Pinv = spla.LinearOperator((n_u, n_u), matvec=precondition)
+        Pinv = spla.LinearOperator((n_u, n_u), matvec=self._precondition)
         count = [0]
 
         def callback(*_):
@@ -148,7 +157,7 @@ class ReducedSaddleSolver(LinearSolver):
         x[:n_u], x[z], x[mu] = u, Z, mu_x
         residual = float(np.linalg.norm(b - self._matvec(x))) / norm_b if norm_b > 0.0 else 0.0
         if not np.isfinite(residual) or residual > max(10.0 * target, 1e-8):
-            raise LinearSolverError(f"saddle-amg: reached relative residual {residual:.2e} in {count[0]} "
+            raise LinearSolverError(f"{self.backend}: reached relative residual {residual:.2e} in {count[0]} "
                                     f"Krylov iterations")
         return x, count[0], residual
 
@@ -158,9 +167,11 @@ class ReducedSaddleSolver(LinearSolver):
 
 
 def reduced_saddle(A: sp.csr_matrix, n_u: int, constraints: list[FitConstraint], symmetric: bool,
-                   near_null: np.ndarray | None = None, rtol: float = 1e-10) -> ReducedSaddleSolver:
+                   near_null: np.ndarray | None = None, rtol: float = 1e-10,
+                   preconditioner: str = "amg") -> ReducedSaddleSolver:
     """Set up :class:`ReducedSaddleSolver` for ``A`` (timed like the other backends)."""
     t0 = time.perf_counter()
-    solver = ReducedSaddleSolver(A, n_u, constraints, symmetric, near_null, rtol).bind(sp.csr_matrix(A))
+    solver = ReducedSaddleSolver(A, n_u, constraints, symmetric, near_null, rtol,
+                                 preconditioner=preconditioner).bind(sp.csr_matrix(A))
     solver.info.update(backend=solver.backend, symmetric=symmetric, setup_s=time.perf_counter() - t0)
     return solver
