@@ -307,21 +307,21 @@ def factorize(A: sp.spmatrix, *, backend: str = "auto", symmetric: bool = True,
     ``A``. ``near_null`` (e.g. :func:`rigid_body_modes`) and ``rtol`` (relative residual)
     serve pyamg only; ``indefinite``: a saddle-point matrix (:func:`choose_backend`).
     ``saddle``: ``(n_u, constraints)`` of nurbs_fit's saddle point
-    (:mod:`cgfem.solve.saddle`): with ``auto``, one above :data:`SADDLE_MAX_DOFS` is solved
-    on the bodies' dofs, by AMG-preconditioned CG if symmetric, else by GMRES preconditioned
-    by the factorized reduced matrix. Raises :class:`LinearSolverError` on a singular or non-finite matrix,
+    (:mod:`cgfem.solve.saddle`): with ``auto``, a symmetric one above
+    :data:`SADDLE_MAX_DOFS` is solved on the bodies' dofs by AMG-preconditioned CG. Raises :class:`LinearSolverError` on a singular or non-finite matrix,
     ``ValueError`` on a bad backend name or shape."""
     if not sp.issparse(A) or A.ndim != 2 or A.shape[0] != A.shape[1]:
         raise ValueError(f"A must be a square sparse matrix, got {type(A).__name__} "
                          f"of shape {getattr(A, 'shape', None)}")
     name = choose_backend(A.shape[0], symmetric, backend, indefinite)
-    if indefinite and A.shape[0] > SADDLE_MAX_DOFS and saddle is not None and backend == "auto":
+    if indefinite and symmetric and A.shape[0] > SADDLE_MAX_DOFS and saddle is not None and backend == "auto":
+        # non-symmetric ones stay whole: GMRES preconditioned by the factorized reduced matrix
+        # (ReducedSaddleSolver, preconditioner="pardiso") matched the whole factorization on
+        # chain2_steel at level 2 (same 74 Newton iterations, 564 s / 2.2 GB against 632 s /
+        # 2.9 GB) but at level 3 its second Newton solve had not finished after 10 min
         from cgfem.solve.saddle import reduced_saddle
-        # symmetric: AMG-preconditioned CG; non-symmetric: GMRES on the reduced matrix
-        # factorized like the bodies' own (AMG is weak on non-symmetric systems)
-        preconditioner = "amg" if symmetric else choose_backend(saddle[0], False)
         return reduced_saddle(sp.csr_matrix(A, dtype=np.float64), saddle[0], saddle[1], symmetric, near_null,
-                              max(rtol, 1e-10), preconditioner=preconditioner)
+                              max(rtol, 1e-10))
     if indefinite and symmetric and A.shape[0] > SADDLE_MAX_DOFS:
         raise LinearSolverError(f"{name}: a symmetric saddle-point system of {A.shape[0]} unknowns "
                                 f"(above {SADDLE_MAX_DOFS}) would not fit in memory factorized, and "
