@@ -85,3 +85,11 @@ def test_nurbs_boundary_default_spacing_is_half_the_element():
     first = t.triangles[: len(t.triangles) // 2]
     edges = np.concatenate([t.x[first[:, 1]] - t.x[first[:, 0]], t.x[first[:, 2]] - t.x[first[:, 1]]])
     assert np.linalg.norm(edges, axis=1).max() <= 0.5 * emb.grid.h * 1.05
+
+
+def test_keep_vertices_renumbers_the_triangles_left():
+    from cgfem.embedding.tessellate import keep_vertices
+
+    triangles = np.array([[0, 1, 2], [1, 3, 2], [3, 4, 2]])
+    kept, used = keep_vertices(triangles, np.array([True, True, True, False, True]))
+    assert np.array_equal(kept, [[0, 1, 2]]) and np.array_equal(used, [True, True, True, False, False])

@@ -19,7 +19,7 @@ import numpy as np
 from cgfem import __version__
 from cgfem.case.model import SURFACES, Body, Case
 from cgfem.embedding.quadrature import Embedding, embed, grid_for
-from cgfem.embedding.tessellate import Tessellation, boundary_tessellation
+from cgfem.embedding.tessellate import Tessellation, boundary_tessellation, keep_vertices
 from cgfem.contact.assembly import summary as contact_summary
 from cgfem.contact.build import DEFINITIONS as CONTACT_DEFINITIONS, build_pair
 from cgfem.contact.fit import FIT_NAME_SEPARATOR, fit_mesh, write_fit_json, write_fit_vtu
@@ -175,13 +175,9 @@ class BoundaryView:
     def of(cls, model: BodyModel, solid) -> "BoundaryView":
         mesh = boundary_tessellation(solid, model.embedding)
         slots, xi = model.space.locate(mesh.x)
-        lost = slots < 0
-        if lost.any():
-            keep = ~lost[mesh.triangles].any(axis=1)
-            used = np.zeros(lost.size, bool)
-            used[mesh.triangles[keep]] = True
-            number = np.cumsum(used) - 1
-            mesh = Tessellation(mesh.x[used], number[mesh.triangles[keep]], mesh.patch[used])
+        if np.any(slots < 0):
+            triangles, used = keep_vertices(mesh.triangles, slots >= 0)
+            mesh = Tessellation(mesh.x[used], triangles, mesh.patch[used])
             slots, xi = slots[used], xi[used]
         return cls(mesh, slots, xi)
 

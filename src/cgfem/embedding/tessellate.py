@@ -41,6 +41,15 @@ class Tessellation:
     patch: np.ndarray
 
 
+def keep_vertices(triangles: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The triangles (m', 3) whose three vertices are all kept (``keep`` (n,) bool),
+    renumbered onto the vertices they use, and those vertices (n,) bool."""
+    inside = keep[triangles].all(axis=1)
+    used = np.zeros(keep.size, bool)
+    used[triangles[inside]] = True
+    return (np.cumsum(used) - 1)[triangles[inside]], used
+
+
 def span_samples(surface: NurbsSurface, spacing: float) -> tuple[np.ndarray, np.ndarray]:
     """Parameters in u and in v: every distinct knot, and within each knot span enough
     equally spaced values that neighbouring samples lie at most about ``spacing`` apart along

@@ -20,6 +20,7 @@ from matplotlib.cm import ScalarMappable
 from matplotlib.colors import Normalize, TwoSlopeNorm
 from matplotlib.figure import Figure
 
+from cgfem.embedding.tessellate import keep_vertices
 from cgfem.report.runs import ACTIVE, BODY, DISPLACEMENT, STRESS, VON_MISES, Run, load_runs, stress_component
 from cgfem.report.style import new_figure
 
@@ -107,10 +108,9 @@ def _surface(run: Run, body: str | None = None, warp: bool = True):
     triangles = cells.get("triangle")
     if body is not None:
         keep = data[BODY].ravel() == run.body_index(body)
+        if triangles is not None:   # the body's triangles, on the vertices they use
+            triangles, keep = keep_vertices(triangles, keep)
         x, u, data = x[keep], u[keep], {k: v[keep] for k, v in data.items()}
-        if triangles is not None:
-            number = np.cumsum(keep) - 1
-            triangles = number[triangles[keep[triangles].all(axis=1)]]
     return (x + u if warp else x), u, data, triangles
 
 
