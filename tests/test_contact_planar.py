@@ -47,3 +47,47 @@ def test_contact_force_balances_the_tractions(tmp_path, surface, level):
     assert step["contact"]["continuous_residual"] <= case.solver.newton_tol
     if step["contact"]["extended_hits"] == 0:
         assert step["contact"]["continuous_residual"] == pytest.approx(last, rel=1e-3, abs=1e-11)
+
+
+def test_failure_message_says_what_contact_was_doing(tmp_path):
+    """A run stopped by Newton's cap names the contact set's state at its last iterate: the
+    active points and what changed since the iterate before (here planar at level 0 with one
+    Newton iteration allowed: the closed interface stays active, nothing switches)."""
+    import dataclasses
+    case = load_case(CASE)
+    case = dataclasses.replace(case, solver=dataclasses.replace(case.solver, max_newton=1, max_cutbacks=0))
+    status = run_case(case, 0, "nurbs_fe", tmp_path)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert status.status == "failed" and summary["status"] == "failed"
+    message = summary["message"]
+    assert "Newton stopped on max_iterations" in message
+    import re
+    active = int(re.search(r"; (\d+) active contact points", message).group(1))
+    assert active > 100
+    assert "at the last iteration 0 switched status and 0 active ones moved" in message
+
+
+def test_recorded_changes_count_switches_and_moves():
+    """The pair's record between two linearization points: status switches, and active
+    points whose hit moved to another master triangle (facets) or element (NURBS+FE)."""
+    from types import SimpleNamespace
+    from cgfem.contact.assembly import ContactSet
+    from cgfem.contact.pair import ContactPair, ContactState
+    from cgfem.contact.surfaces import RayHits
+
+    def hits(piece, slot):
+        n = len(piece)
+        return RayHits(np.ones(n, bool), np.asarray(piece), np.zeros((n, 2)), np.zeros(n),
+                       None if slot is None else np.asarray(slot))
+    pair = SimpleNamespace(state=ContactState(np.zeros(5)))
+    ContactPair._record(pair, hits([0, 0, 1, 1, 2], [3, 4, 5, 6, 7]), np.array([1, 1, 1, 0, 0], bool), None)
+    ContactPair._record(pair, hits([0, 0, 1, 1, 2], [3, 9, 5, 6, 8]), np.array([1, 1, 0, 1, 0], bool), None)
+    # points 2 and 3 switched; point 1 stayed active on another element (point 4 is inactive)
+    assert (pair.state.last_switched, pair.state.last_moved) == (2, 1)
+    facets = SimpleNamespace(state=ContactState(np.zeros(3)))
+    ContactPair._record(facets, hits([4, 5, 6], None), np.ones(3, bool), None)
+    ContactPair._record(facets, hits([4, 7, 8], None), np.ones(3, bool), None)
+    assert (facets.state.last_switched, facets.state.last_moved) == (0, 2)
+    text = ContactSet.changes(SimpleNamespace(pairs=[pair, facets]))
+    assert text == ("6 active contact points; at the last iteration 2 switched status and 3 active ones moved "
+                    "to another master triangle or element")

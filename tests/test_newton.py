@@ -105,3 +105,22 @@ def test_inexact_newton_asks_for_the_forcing_tolerance_and_still_converges():
     assert asked[0] == pytest.approx(0.1 * tol * res.reference / norms[0]) and max(asked) <= 0.1
     assert asked[-1] > 1e3 * asked[0]   # the last solves stop many digits earlier
     assert np.abs(res.u - target).max() < 1e-9
+
+
+def test_log_notes_say_how_each_step_was_taken():
+    """The log's note names the line-search fraction and the limit's shortening, and is
+    empty for a full step: x^2 - 3.61 from 0.5 with NaN beyond x = 2 takes a quarter step
+    to 1.34, whose full step lands at 2.02 (NaN) so half of it is taken, then full steps; a limit halving every step is reported as 'limited to 0.5'."""
+    def r(x):
+        return np.nan if x > 2.0 else x * x - 3.61
+    notes: list[str] = []
+    res = newton(_scalar(r, lambda x: 2.0 * x), np.array([0.5]), _solve, tol=1e-13, reference=1.0, max_iter=20,
+                 log=lambda k, rel, note: notes.append(note))
+    assert res.converged
+    assert notes[:3] == ["", "step 0.25", "step 0.5"] and all(n == "" for n in notes[3:])
+    notes.clear()
+    res = newton(_scalar(lambda x: x - 1.0, lambda x: 1.0), np.array([0.0]), _solve, tol=1e-3, reference=1.0,
+                 max_iter=20, limit=lambda du: 0.5 * du, log=lambda k, rel, note: notes.append(note))
+    # x halves its distance to the root each step: 10 steps to 1e-3
+    assert res.converged and len(res.residuals) - 1 == 10
+    assert all(n == "limited to 0.5" for n in notes[1:])

@@ -160,3 +160,35 @@ def test_fading_shift_restores_fast_convergence_on_a_soft_mode():
     assert fixed.converged and len(fixed.residuals) - 1 > 250
     assert fading.converged and len(fading.residuals) - 1 < 25           # 18 measured
     np.testing.assert_allclose(fading.u, [f / k], rtol=1e-12)
+
+
+def test_step_limit_of_a_floating_body_adapts_its_shift():
+    """A Newton step moving a body held by contact alone by 10 h is scaled to 1 h
+    (FLOATING_STEP), and the body's tangent shift is raised 10-fold for the next iterations
+    (a Levenberg-Marquardt damping of its soft rigid motions); steps within the limit are
+    kept as they are and lower the damping by DAMPING_DECAY, down to 1; near convergence
+    (residual below DAMPING_ABOVE of the increment's largest) a limited step lowers it too."""
+    from cgfem.solve.static import DAMPING_ABOVE, DAMPING_DECAY, FLOATING_STEP
+    data = {"name": "free", "kinematics": "small", "steps": 1,
+            "bodies": {"box": {"geometry": {"builder": "box", "min": [0, 0, 0], "max": [1.0, 0.6, 0.5]},
+                               "material": {"model": "linear_elastic", "E": 1e9, "nu": 0.3},
+                               "grid": {"h0": 0.25, "offset": [0.13, 0.29, 0.41]}}},
+            "boundary": []}
+    body = build_models(parse_case(data, Path(".")), 0, "nurbs_fe", lambda message: None)[0][0]
+    system = System([body])
+    system.floating = [0]
+    h = body.space.h
+    du = np.zeros(body.n_dofs)
+    du[0::3] = 10.0 * FLOATING_STEP * h                      # a rigid x translation of 10 h
+    limited = system.limit_step(du)
+    np.testing.assert_allclose(limited, 0.1 * du, rtol=1e-14)
+    assert system.damping == pytest.approx(10.0)
+    small = 0.5 * FLOATING_STEP * h * np.ones(body.n_dofs)
+    assert system.limit_step(small) is small
+    assert system.damping == pytest.approx(10.0 * DAMPING_DECAY)
+    for _ in range(5):
+        system.limit_step(small)
+    assert system.damping == 1.0
+    system.damping, system._fading = 8.0, 0.5 * DAMPING_ABOVE
+    np.testing.assert_allclose(system.limit_step(du), 0.1 * du, rtol=1e-14)
+    assert system.damping == pytest.approx(8.0 * DAMPING_DECAY)

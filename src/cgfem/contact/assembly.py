@@ -91,6 +91,16 @@ class ContactSet:
     def frozen(self) -> list[np.ndarray]:
         return [p.state.p_N.copy() for p in self.pairs]
 
+    def changes(self) -> str:
+        """What the contact set did at the last linearization point, for a failure message:
+        active points, and since the point before, status switches and active points whose
+        master hit moved to another triangle or element."""
+        active = sum(int(p.state.active.sum()) for p in self.pairs if p.state.active is not None)
+        switched = sum(p.state.last_switched for p in self.pairs)
+        moved = sum(p.state.last_moved for p in self.pairs)
+        return (f"{active} active contact points; at the last iteration {switched} switched status and "
+                f"{moved} active ones moved to another master triangle or element")
+
     def active(self) -> list[np.ndarray]:
         return [np.zeros(p.n_points, bool) if p.state.active is None else p.state.active.copy()
                 for p in self.pairs]

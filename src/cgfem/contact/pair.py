@@ -77,6 +77,12 @@ class ContactState:
     #: the Verlet list of the search (:meth:`ContactPair.candidates`): the slave points, the
     #: master samples and the kinematic vectors it was built at
     candidates: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+    #: the master piece of every hit at the last linearization point (triangle, or patch and
+    #: element: :func:`_master_key`), and what changed since the one before: points that
+    #: switched status, active points whose hit moved to another piece
+    key: np.ndarray | None = None
+    last_switched: int = 0
+    last_moved: int = 0
 
 
 @dataclass(frozen=True)
@@ -288,6 +294,11 @@ class ContactPair:
 
     def _record(self, hits: RayHits, active: np.ndarray, natural: np.ndarray) -> None:
         st = self.state
+        key = _master_key(hits)
+        if st.active is not None and st.key is not None:
+            st.last_switched = int(np.count_nonzero(active != st.active))
+            st.last_moved = int(np.count_nonzero(active & st.active & np.any(key != st.key, axis=1)))
+        st.key = key
         if st.active is not None and st.switches is not None:
             st.switches += active != st.active
             if st.held is not None:
@@ -320,6 +331,13 @@ def _largest_move(du: np.ndarray) -> float:
 def node_dofs(nodes: np.ndarray) -> np.ndarray:
     """Dofs (k, 3 A) of nodes (k, A), node-major: ``3 node + component``."""
     return (3 * nodes[:, :, None] + np.arange(3)).reshape(nodes.shape[0], -1)
+
+
+def _master_key(hits: RayHits) -> np.ndarray:
+    """Per hit (n, 2), the master piece it lies on: the triangle (facets), or the patch and
+    the master element (NURBS+FE, whose surface is kinked at the elements' faces)."""
+    slot = np.full(hits.piece.shape, -1, np.int64) if hits.slot is None else hits.slot
+    return np.column_stack([hits.piece, slot])
 
 
 def _slots(hits: RayHits, rows: np.ndarray) -> np.ndarray | None:

@@ -54,13 +54,15 @@ class NewtonResult:
 
 def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0: np.ndarray,
            solve: Callable[[object, np.ndarray], np.ndarray], *, tol: float, reference: float,
-           max_iter: int, log: Callable[[int, float], None] | None = None,
-           fixed_tangent: bool = False, limit: Callable[[np.ndarray], float] | None = None,
+           max_iter: int, log: Callable[[int, float, str], None] | None = None,
+           fixed_tangent: bool = False, limit: Callable[[np.ndarray], np.ndarray] | None = None,
            forcing: float | None = None) -> NewtonResult:
     """Solve ``r(u) = 0`` from ``u0`` until ``|r| <= tol * max(reference, |r(u0)|)``. With
     ``fixed_tangent`` no tangent is assembled (``solve`` gets None and must use a
-    factorization it kept: modified Newton). ``limit(du)``: a factor in (0, 1] the Newton
-    step is scaled by before the line search (a trust region on some unknowns). ``forcing``:
+    factorization it kept: modified Newton). ``limit(du)``: the Newton step shortened
+    before the line search (a trust region on some unknowns), ``du`` itself if it is not.
+    ``log(iteration, |r| / reference, note)``: ``note`` says how the step was shortened
+    (line-search fraction, the limit's ratio of step norms), empty for a full step. ``forcing``:
     inexact Newton (module docstring), None for exact solves."""
     u = u0.copy()
     need = not fixed_tangent
@@ -69,7 +71,7 @@ def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0
     reference = max(reference, norm)
     result = NewtonResult(u, False, [norm], reference)
     if log:
-        log(0, norm / reference if reference > 0.0 else norm)
+        log(0, norm / reference if reference > 0.0 else norm, "")
     if not np.isfinite(norm):
         result.reason = "nan"
         return result
@@ -82,8 +84,11 @@ def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0
         except RuntimeError as err:   # LinearSolverError: singular, no convergence, NaN
             result.reason = f"linear_solver: {err}"
             return result
+        limited = du
         if limit is not None:
-            du = du * limit(du)
+            limited = limit(du)
+        shortened = float(np.linalg.norm(limited)) / float(np.linalg.norm(du)) if limited is not du else 1.0
+        du = limited
         # monotone first; if no step decreases the residual, the largest step below the
         # largest of the last NONMONOTONE residuals (from the same trials, not assembled again)
         bound = max(result.residuals[-NONMONOTONE:])
@@ -96,22 +101,22 @@ def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0
             n_new = float(np.linalg.norm(r_new))
             armijo = 1.0 - 2.0 * ARMIJO * step
             if np.isfinite(n_new) and n_new ** 2 <= armijo * norm ** 2:
-                trial = (candidate, r_new, n_new, K_new)
+                trial = (candidate, r_new, n_new, K_new, step)
                 break
             if fallback is None and np.isfinite(n_new) and n_new ** 2 <= armijo * bound ** 2:
-                fallback = (candidate, r_new, n_new, K_new)
+                fallback = (candidate, r_new, n_new, K_new, -step)
             step *= 0.5
         trial = trial or fallback
         if trial is None:
             result.reason = "line_search"
             return result
-        u, r, norm, K_new = trial
+        u, r, norm, K_new, taken = trial
         if need:
             K = K_new if K_new is not None else assemble(u, True)[1]
         result.u = u
         result.residuals.append(norm)
         if log:
-            log(it, norm / reference)
+            log(it, norm / reference, _step_note(taken, shortened))
     else:
         if norm <= tol * reference:
             result.converged, result.reason = True, "converged"
@@ -119,6 +124,17 @@ def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0
             result.reason = "max_iterations"
     result.u = u
     return result
+
+
+def _step_note(step: float, shortened: float) -> str:
+    """How a Newton step was taken: the line-search fraction (negative: accepted by the
+    non-monotone test) and the limit's shortening, empty for a full step."""
+    notes = []
+    if step != 1.0:
+        notes.append(f"step {abs(step):.3g}" + (" non-monotone" if step < 0 else ""))
+    if shortened < 1.0:
+        notes.append(f"limited to {shortened:.3g}")
+    return ", ".join(notes)
 
 
 def forcing_rtol(forcing: float, tol: float, reference: float, norm: float) -> float:
