@@ -320,7 +320,7 @@ def test_claims_follow_the_fixture(tmp_path, holds):
     chain3 = [make_run(tmp_path, "chain3", 1, s, bodies=("link_a", "link_c", "link_b"), von_mises=v)
               for s, v in (("facets", 2e8 if holds else 4e8), ("nurbs_fe", 3e8))]
     found = claims([table], chain2, chain3, rate_tolerance=0.1, reaction_level=2, pulled=PULLED,
-                   component=1, von_mises_level=1, von_mises_body="link_c")
+                   component=1, von_mises_levels=[1], von_mises_body="link_c")
     assert [c.reproduced for c in found] == [holds] * 4
     text = write_claims(tmp_path / "claims.md", found).read_text()
     assert text.count("| yes |") == (4 if holds else 0) and text.count("| no |") == (0 if holds else 4)
@@ -446,3 +446,24 @@ def test_centred_colour_values_keep_zero_in_the_middle():
 
     v = np.array([-20.0, -10.0, 0.0, 4.5, 9.0])
     assert np.allclose(centred(v, (-20.0, 9.0)), [-1.0, -0.5, 0.0, 0.5, 1.0])
+
+
+def test_claim_4_over_levels_decides_where_it_can(tmp_path):
+    """Claim 4 on levels 1 and 2: decided where both runs converged, undecided levels named
+    with the reason; reproduced only if facets is lower on every decided level."""
+    links = ("link_a", "link_c", "link_b")
+    chain3 = [make_run(tmp_path, "chain3", 1, "facets", bodies=links, von_mises=2.9e8),
+              make_run(tmp_path, "chain3", 1, "nurbs_fe", bodies=links, von_mises=5.0e8),
+              make_run(tmp_path, "chain3", 2, "facets", bodies=links, von_mises=1e8, status="failed",
+                       reactions=np.zeros((2, 2))),
+              make_run(tmp_path, "chain3", 2, "nurbs_fe", bodies=links, von_mises=6.0e8)]
+    claim = claim_lower_von_mises(load_runs(chain3), [1, 2], "link_c")
+    assert claim.reproduced and "(meshes 1, 2)" in claim.text
+    assert claim.numbers == ("L1: facets 290 MPa, nurbs_fe 500 MPa; L2: not decided, missing or unconverged "
+                             "runs: facets failed, nurbs_fe converged")
+    # higher with facets on the one decided level: not reproduced
+    higher = [make_run(tmp_path / "b", "chain3", 1, s, bodies=links, von_mises=v)
+              for s, v in (("facets", 6e8), ("nurbs_fe", 5e8))]
+    assert not claim_lower_von_mises(load_runs(higher), [1, 2], "link_c").reproduced
+    # nothing decided: not reproduced
+    assert not claim_lower_von_mises(load_runs(chain3[2:]), [1, 2], "link_c").reproduced

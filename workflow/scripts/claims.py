@@ -10,4 +10,4 @@ with open(snakemake.log[0], "w") as sys.stderr:
         snakemake.input.errors, snakemake.input.chain2, snakemake.input.chain3,
         rate_tolerance=c["rate_tolerance"], reaction_level=c["reaction_level"],
         pulled=f["pulled"], component=AXES[f.get("component", "y")],
-        von_mises_level=c["von_mises_level"], von_mises_body=c["von_mises_body"]))
+        von_mises_levels=c["von_mises_levels"], von_mises_body=c["von_mises_body"]))
