@@ -80,11 +80,16 @@ def test_nurbs_boundary_default_spacing_is_half_the_element():
     emb = embed(solid, grid_for(solid, 0.3, 1, (0.13, 0.29, 0.41)))
     t = boundary_tessellation(solid, emb)
     assert np.all(np.isin(t.patch, np.arange(len(emb.patch_names))))
-    # the legs of the (a, b, c) triangles of every cell (grid_triangles lists them first;
-    # a -> b runs along u, b -> c along v) stay within the spacing h / 2
-    first = t.triangles[: len(t.triangles) // 2]
-    edges = np.concatenate([t.x[first[:, 1]] - t.x[first[:, 0]], t.x[first[:, 2]] - t.x[first[:, 1]]])
-    assert np.linalg.norm(edges, axis=1).max() <= 0.5 * emb.grid.h * 1.05
+    # the legs of every triangle (along u and v) stay within the spacing h / 2: vertices are
+    # numbered i n_v + j in each patch, so of a triangle's three edges the diagonal joins the
+    # two vertices whose numbers differ most (n_v + 1) and the other two are the legs
+    tri = t.triangles
+    ends = np.stack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]], axis=1)        # (m, 3, 2)
+    diagonal = np.argmax(np.abs(ends[:, :, 0] - ends[:, :, 1]), axis=1)
+    legs = ends[np.arange(len(tri))[:, None], (diagonal[:, None] + [1, 2]) % 3].reshape(-1, 2)
+    lengths = np.linalg.norm(t.x[legs[:, 1]] - t.x[legs[:, 0]], axis=1)
+    assert lengths.size == 2 * len(tri)
+    assert lengths.max() <= 0.5 * emb.grid.h * 1.05
 
 
 def test_keep_vertices_renumbers_the_triangles_left():
