@@ -186,6 +186,25 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return EXIT_OK if status.status == CONVERGED else EXIT_FAILED
 
 
+def _cmd_warmup(args: argparse.Namespace) -> int:
+    import time
+
+    from cgfem.warmup import warm_up
+
+    start = time.perf_counter()
+
+    def log(message: str) -> None:
+        print(f"[{time.perf_counter() - start:8.2f} s] {message}", file=sys.stderr, flush=True)
+
+    try:
+        warm_up(log)
+    except RuntimeError as err:
+        print(f"cgfem: error: {err}", file=sys.stderr)
+        return EXIT_FAILED
+    log("numba kernels compiled and cached")
+    return EXIT_OK
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="cgfem", description="Contact mechanics in the Cartesian "
                                      "grid finite element method with exact NURBS geometry.")
@@ -210,6 +229,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="result folder (created when the run starts; must not be a file)")
     run.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     run.set_defaults(func=_cmd_run)
+    warmup = sub.add_parser("warmup", help="compile and cache the numba kernels (two small contact "
+                            "problems, every surface definition) before a batch of runs")
+    warmup.set_defaults(func=_cmd_warmup)
     return parser
 
 

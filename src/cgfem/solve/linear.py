@@ -308,8 +308,9 @@ def factorize(A: sp.spmatrix, *, backend: str = "auto", symmetric: bool = True,
     serve pyamg only; ``indefinite``: a saddle-point matrix (:func:`choose_backend`).
     ``saddle``: ``(n_u, constraints)`` of nurbs_fit's saddle point
     (:mod:`cgfem.solve.saddle`): with ``auto``, a symmetric one above
-    :data:`SADDLE_MAX_DOFS` is solved on the bodies' dofs by AMG-preconditioned CG. Raises :class:`LinearSolverError` on a singular or non-finite matrix,
-    ``ValueError`` on a bad backend name or shape."""
+    :data:`SADDLE_MAX_DOFS` is solved on the bodies' dofs by AMG-preconditioned CG. Raises
+    :class:`LinearSolverError` on a singular or non-finite matrix, ``ValueError`` on a bad
+    backend name or shape."""
     if not sp.issparse(A) or A.ndim != 2 or A.shape[0] != A.shape[1]:
         raise ValueError(f"A must be a square sparse matrix, got {type(A).__name__} "
                          f"of shape {getattr(A, 'shape', None)}")
