@@ -49,7 +49,7 @@ def test_smoke_plan_has_every_rule_once_per_job(workdir):
     config = yaml.safe_load((REPO / "config" / "smoke.yaml").read_text())
     jobs = planned_jobs(workdir, "--configfile", "config/smoke.yaml")
     n_planar = len(config["examples"]["planar"]["levels"]) * len(config["surfaces"])
-    assert jobs == {"all": 1, "check_case": 4, "warmup": 1, "run_case": expected_runs(config), "planar_reference": 1,
+    assert jobs == {"all": 1, "check_case": 4, "run_case": expected_runs(config), "planar_reference": 1,
                     "planar_errors": n_planar, "claims": 1, **{f: 1 for f in FIGURES}}
     assert expected_runs(config) == 15                  # 5 example levels x 3 definitions
 

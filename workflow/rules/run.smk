@@ -1,20 +1,3 @@
-rule warmup:
-    """Compile and cache the numba kernels once (`cgfem warmup`: two small contact problems
-    with every surface definition), so that the runs, started side by side, do not each
-    compile the same kernels. Its flag is an `ancient` input of the runs: redoing it never
-    makes a finished run stale."""
-    output:
-        touch("results/warmup.done"),
-    conda:
-        ENV
-    log:
-        "logs/warmup.log",
-    threads: 1
-    shell:
-        "NUMBA_NUM_THREADS={threads} OMP_NUM_THREADS={threads} MKL_NUM_THREADS={threads} "
-        "cgfem warmup 2> {log}"
-
-
 rule run_case:
     """Solve one example at one level with one surface definition. A run that fails to
     converge (exit 1, summary.json written with status "failed", or "outer_not_converged"
@@ -23,7 +6,6 @@ rule run_case:
     input:
         case=case_file,
         check="results/check/{case}.json",
-        warm=ancient("results/warmup.done"),
     output:
         summary=f"{RUN}/summary.json",
     params:
