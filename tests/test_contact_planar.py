@@ -91,3 +91,17 @@ def test_recorded_changes_count_switches_and_moves():
     text = ContactSet.changes(SimpleNamespace(pairs=[pair, facets]))
     assert text == ("6 active contact points; at the last iteration 2 switched status and 3 active ones moved "
                     "to another master triangle or element")
+
+
+def test_floating_body_is_reported_with_no_stabilizing_force(tmp_path):
+    """The lower block is held along z by contact alone: its supports (y on zmin, x on xmin
+    and xmax) leave the z translation and the rotation about the x axis through zmin free.
+    The summary names it, with a zero stabilizing force (the shift acts on the tangent only)
+    and an unbalanced force far below the contact force it carries."""
+    case = load_case(CASE)
+    assert run_case(case, 0, "nurbs_fe", tmp_path).status == "converged"
+    contact = json.loads((tmp_path / "summary.json").read_text())["steps"][-1]["contact"]
+    floating = contact["floating"]
+    assert list(floating) == ["lower"] and floating["lower"]["free_modes"] == 2
+    assert floating["lower"]["stabilizing_force"] == 0.0
+    assert floating["lower"]["residual"] <= 1e-8 * np.linalg.norm(contact["force"])

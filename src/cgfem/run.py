@@ -318,6 +318,16 @@ def _write_fits(out: Path, system: System, record: StepRecord, number: int) -> d
             for name, (b, V) in zip(names, fits)}
 
 
+def _floating_summary(system: System, record: StepRecord, unknowns: np.ndarray) -> dict:
+    """Per body held by contact alone in some rigid motion: how many rigid motions its own
+    conditions leave free, the stabilizing force (zero: the shift acts on the tangent only,
+    :meth:`~cgfem.solve.static.System._floating_shift`) and the norm of the force its
+    equations leave unbalanced at the converged state (N), to compare with the contact force."""
+    r = system.split(system.assemble(unknowns, record.load_factor, record.frozen_stress, False)[0])
+    return {system.bodies[i].name: {"free_modes": system.free_modes.get(i, 0), "stabilizing_force": 0.0,
+                                    "residual": float(np.linalg.norm(r[i]))} for i in system.floating}
+
+
 def _write_step(out: Path, system: System, record: StepRecord, number: int, views: list[BoundaryView],
                 log: Callable[[str], None]) -> dict:
     """Write the files of step ``number`` and return its entry of ``summary.json``."""
@@ -335,6 +345,8 @@ def _write_step(out: Path, system: System, record: StepRecord, number: int, view
         # element's extension past a grid face, extended_hits = 0)
         contact["extended_hits"] = record.extended_hits
         contact["continuous_residual"] = record.continuous_residual
+        if system.floating:
+            contact["floating"] = _floating_summary(system, record, unknowns)
     outputs = [step_outputs(m, u, s, v) for m, u, s, v in zip(models, record.u, record.recovered, views)]
     write_step(out, number, outputs)
     reactions = {}

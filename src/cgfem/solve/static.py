@@ -109,6 +109,8 @@ class System:
         #: bodies with a rigid motion their own conditions do not hold (held by contact
         #: alone in it), found from the first tangent (:meth:`free_rigid_modes`)
         self.floating: list[int] | None = None if self.contact else []
+        #: per body, the rigid motions its own conditions leave free (with :attr:`floating`)
+        self.free_modes: dict[int, int] = {}
         self._K: sp.csr_matrix | None = None
         self._shift: sp.csr_matrix | None = None
         #: load factor and largest residual norm of the increment (:meth:`_shift_factor`)
@@ -164,7 +166,8 @@ class System:
             self._K = K
         if Kc is not None:
             if self.floating is None:
-                self.floating = [i for i, p in enumerate(parts) if self.free_rigid_modes(i, p[1])]
+                self.free_modes = {i: self.free_rigid_modes(i, p[1]) for i, p in enumerate(parts)}
+                self.floating = [i for i, n in self.free_modes.items() if n]
             K = K + Kc.tocsr()
             if self.floating:
                 K = K + self.damping * self._shift_factor(t, float(np.linalg.norm(r))) * self._floating_shift(K)
