@@ -207,10 +207,10 @@ class System:
         ``DAMPING_ABOVE`` of the increment's largest (the body is still finding its contacts)
         also multiplies the floating bodies' tangent shift by ``1 / f`` for the next tangents
         (:attr:`damping`, at most ``DAMPING_MAX``); any other step divides it by
-        ``1 / DAMPING_DECAY`` again, down to 1: the
-        soft rigid step then shrinks inside the solve, where the other bodies follow it,
-        instead of every body's step being scaled with it (chain3 at level 2 with nurbs_fit:
-        full load in 17 iterations instead of 30 with steps cut to 5-8 % and a cut-back)."""
+        ``1 / DAMPING_DECAY`` again, down to 1. The soft rigid step then shrinks inside the
+        solve, where the other bodies follow it, instead of every body's step being scaled
+        with it (chain3 at level 2 with nurbs_fit: full load in 17 iterations instead of 30
+        with steps cut to 5-8 % and a cut-back)."""
         factor = 1.0
         for i in self.floating or ():
             move = float(np.abs(du[self.offsets[i]:self.offsets[i + 1]]).max(initial=0.0))
