@@ -352,7 +352,7 @@ def test_claims_with_missing_runs_are_not_reproduced(tmp_path):
     assert not claim_optimal_rate([table], 0.1).reproduced
     runs = load_runs([make_run(tmp_path, "chain2_steel", 2, "facets", reactions=np.ones((5, 2)))])
     assert not claim_lower_reaction(runs, 2, PULLED, 1).reproduced
-    assert not claim_lower_von_mises(runs, 2, "link_c").reproduced
+    assert not claim_lower_von_mises(runs, [2], "link_c").reproduced
 
 
 def test_claims_compare_the_nurbs_definitions_that_were_run(tmp_path):
@@ -409,7 +409,7 @@ def test_outer_not_converged_is_neither_converged_nor_failed(tmp_path):
     chain3 = [make_run(tmp_path, "chain3", 0, "facets", bodies=("link_a", "link_c", "link_b"), von_mises=1e8),
               make_run(tmp_path, "chain3", 0, "nurbs_fe", bodies=("link_a", "link_c", "link_b"), von_mises=3e8,
                        status="outer_not_converged")]
-    claim = claim_lower_von_mises(load_runs(chain3), 0, "link_c")
+    claim = claim_lower_von_mises(load_runs(chain3), [0], "link_c")
     assert not claim.reproduced and "nurbs_fe outer_not_converged" in claim.numbers
 
 
@@ -422,7 +422,7 @@ def test_claim_4_needs_facets_to_carry_the_load(tmp_path):
     for step in data["steps"]:
         step["contact"]["force"] = [0.0, 1e-9, 0.0]
     summary.write_text(json.dumps(data))
-    claim = claim_lower_von_mises(load_runs(chain3), 0, "link_c")
+    claim = claim_lower_von_mises(load_runs(chain3), [0], "link_c")
     assert not claim.reproduced and "facets carries no load" in claim.numbers and "never touch" in claim.numbers
 
 

@@ -77,10 +77,8 @@ class ContactState:
     #: the Verlet list of the search (:meth:`ContactPair.candidates`): the slave points, the
     #: master samples and the kinematic vectors it was built at
     candidates: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
-    #: the master piece of every hit at the last linearization point (triangle, or patch and
-    #: element: :func:`_master_key`), and what changed since the one before: points that
-    #: switched status, active points whose hit moved to another piece
-    key: np.ndarray | None = None
+    #: what changed between the last two linearization points: points that switched status,
+    #: active points whose hit moved to another master piece (:func:`_master_key`)
     last_switched: int = 0
     last_moved: int = 0
 
@@ -294,17 +292,17 @@ class ContactPair:
 
     def _record(self, hits: RayHits, active: np.ndarray, natural: np.ndarray) -> None:
         st = self.state
-        key = _master_key(hits)
-        if st.active is not None and st.key is not None:
-            st.last_switched = int(np.count_nonzero(active != st.active))
-            st.last_moved = int(np.count_nonzero(active & st.active & np.any(key != st.key, axis=1)))
-        st.key = key
-        if st.active is not None and st.switches is not None:
-            st.switches += active != st.active
-            if st.held is not None:
-                hold = ~st.held & (st.switches >= MAX_SWITCHES)
-                st.held |= hold
-                st.held_active[hold] = active[hold]
+        if st.active is not None:
+            switched = active != st.active
+            # st.hits: the pairing recorded with st.active
+            moved = active & st.active & np.any(_master_key(hits) != _master_key(st.hits), axis=1)
+            st.last_switched, st.last_moved = int(np.count_nonzero(switched)), int(np.count_nonzero(moved))
+            if st.switches is not None:
+                st.switches += switched
+                if st.held is not None:
+                    hold = ~st.held & (st.switches >= MAX_SWITCHES)
+                    st.held |= hold
+                    st.held_active[hold] = active[hold]
         st.active, st.hits, st.natural = active, hits, natural
 
     # -- outputs ---------------------------------------------------------------------------

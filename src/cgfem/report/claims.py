@@ -122,12 +122,11 @@ def claim_lower_reaction(runs: list[Run], level: int, pulled: str, component: in
 CARRIES_LOAD = 0.01
 
 
-def claim_lower_von_mises(runs: list[Run], levels: int | Sequence[int], body: str) -> Claim:
+def claim_lower_von_mises(runs: list[Run], levels: Sequence[int], body: str) -> Claim:
     """Claim 4: peak von Mises of ``body`` with facets below nurbs_fe at each of ``levels``
     where it can be decided (both runs converged and carrying the load through contact:
     :data:`CARRIES_LOAD`). Reproduced when it is decided on at least one level and holds on
     every level decided; the numbers give each level, undecided ones with the reason."""
-    levels = [levels] if isinstance(levels, (int, np.integer)) else list(levels)
     meshes = ", ".join(str(level) for level in levels)
     text = (f"facets gives a lower peak von Mises than nurbs_fe in {body} of chain3 "
             f"(mesh{'es' if len(levels) > 1 else ''} {meshes})")

@@ -217,10 +217,9 @@ class System:
             allowed = FLOATING_STEP * self.bodies[i].space.h
             if move > allowed:
                 factor = min(factor, allowed / move)
-        if ADAPT_DAMPING:
-            raise_ = factor < 1.0 and self._fading >= DAMPING_ABOVE
-            self.damping = float(np.clip(self.damping / factor if raise_ else self.damping * DAMPING_DECAY,
-                                         1.0, DAMPING_MAX))
+        raise_ = factor < 1.0 and self._fading >= DAMPING_ABOVE
+        self.damping = float(np.clip(self.damping / factor if raise_ else self.damping * DAMPING_DECAY,
+                                     1.0, DAMPING_MAX))
         return du if factor == 1.0 else factor * du
 
     def free_rigid_modes(self, i: int, K: sp.csr_matrix) -> int:
@@ -237,7 +236,8 @@ class System:
     def _floating_shift(self, K: sp.csr_matrix) -> sp.csr_matrix:
         """Tangent-only stabilization of bodies held by contact alone in some rigid motion
         (:meth:`free_rigid_modes`): ``FLOATING_SHIFT``
-        times the diagonal of their first tangent, scaled by :meth:`_shift_factor`, is added
+        times the diagonal of their first tangent, scaled by :meth:`_shift_factor` and by
+        :attr:`damping` (:meth:`limit_step`), is added
         to the matrix Newton solves, never to the residual. It makes the rigid motions of such
         a body solvable before contact forces hold it (and a frictionless spinning mode
         always), and leaves the converged solution exactly that of the unstabilized equations:
@@ -359,8 +359,7 @@ FLOATING_SHIFT = 1e-8
 #: step by DAMPING_DECAY, within [1, DAMPING_MAX]. Raised near convergence too, it piled up to
 #: ~1e3 on chain3 at level 1 with nurbs_fit (limited steps at |r| ~ 3e-3 of the largest: the
 #: middle link's soft spin) and stalled Newton (a cut-back, 225 s instead of 54 s); capped at
-#: 100 it no longer helped level 2
-ADAPT_DAMPING = True
+#: 100 it no longer helped level 2. DAMPING_MAX = 1 turns it off
 DAMPING_DECAY = 0.25
 DAMPING_ABOVE = 1e-2
 DAMPING_MAX = 1e6
