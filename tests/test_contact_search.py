@@ -225,22 +225,24 @@ def test_solve3_equals_numpy():
     assert not rk.solve3(singular, np.ones(3), step)
 
 
-def test_sticky_band_is_exactly_STICKY():
-    """An element is kept for a point within 1 + STICKY of its cube in local coordinates,
-    and left just outside, on every axis and side."""
-    from cgfem.contact._ray_kernels import STICKY, sticky_xi
+def test_sticky_band_is_exactly_the_band():
+    """An element is kept for a point within 1 + band of its cube in local coordinates (the
+    band of every hit, STICKY, and of a held piece, HOLD_BAND), and left just outside, on
+    every axis and side."""
+    from cgfem.contact._ray_kernels import HOLD_BAND, STICKY, sticky_xi
     origin, h, shape = np.zeros(3), 0.5, np.array([3, 3, 3], np.int64)
     elements = np.arange(27, dtype=np.int64)
     centre = np.full(3, 1.5 * h)                    # element (1, 1, 1), slot 13
     xi = np.empty(3)
-    for axis in range(3):
-        for side in (-1.0, 1.0):
-            for extra, kept in ((0.5 * STICKY, True), (2.0 * STICKY, False)):
-                Q = centre.copy()
-                Q[axis] += side * (1.0 + extra) * 0.5 * h
-                assert sticky_xi(Q, 13, origin, h, shape, elements, xi) == kept
-                assert abs(xi[axis] - side * (1.0 + extra)) < 1e-12
-    assert not sticky_xi(centre, -1, origin, h, shape, elements, xi)
+    for band in (STICKY, HOLD_BAND):
+        for axis in range(3):
+            for side in (-1.0, 1.0):
+                for extra, kept in ((0.5 * band, True), (2.0 * band, False)):
+                    Q = centre.copy()
+                    Q[axis] += side * (1.0 + extra) * 0.5 * h
+                    assert sticky_xi(Q, 13, band, origin, h, shape, elements, xi) == kept
+                    assert abs(xi[axis] - side * (1.0 + extra)) < 1e-12
+    assert not sticky_xi(centre, -1, STICKY, origin, h, shape, elements, xi)
 
 
 def test_newton_wraps_across_a_seam(scene):
@@ -263,7 +265,7 @@ def test_newton_wraps_across_a_seam(scene):
         n1 = -mp.normal[0]                            # from outside, against the outward normal
         x1 = mp.x[0] - 0.01 * n1
         for start in (u0 + 2e-3 * (u1 - u0), u1 - 5e-3 * (u1 - u0)):
-            r = rk.ray_newton(x1, n1, 0, start, v, 0.0, MAX_GAP, RAY_TOL, MAX_RAY_NEWTON, *args, -1, out)
+            r = rk.ray_newton(x1, n1, 0, start, v, 0.0, MAX_GAP, RAY_TOL, MAX_RAY_NEWTON, *args, -1, rk.STICKY, out)
             assert r == 1
             np.testing.assert_allclose(out[:2], target, atol=1e-10)
             np.testing.assert_allclose(out[2], 0.01, atol=1e-12)

@@ -340,9 +340,9 @@ def _write_step(out: Path, system: System, record: StepRecord, number: int, view
         contact = contact_summary(points, [p.name for p in system.contact.pairs])
         if system.contact.blocks:
             contact["fits"] = _write_fits(out, system, record, number)
-        # NURBS+FE: the residual over Newton's reference with every master hit on the
-        # continuous surface (Newton's own last residual where no active hit lies on a kept
-        # element's extension past a grid face, extended_hits = 0)
+        # the residual over Newton's reference with every master hit on the
+        # continuous surface (Newton's own last residual where no active hit lies on the
+        # extension of a kept master element or triangle, extended_hits = 0)
         contact["extended_hits"] = record.extended_hits
         contact["continuous_residual"] = record.continuous_residual
         if system.floating:

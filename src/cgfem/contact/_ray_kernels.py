@@ -33,10 +33,14 @@ from cgfem.geometry._nurbs_kernels import surface_derivs
 OUTSIDE = 1
 #: the ray Newton keeps the previous pairing's master element while ``Q`` stays within
 #: 1 + STICKY of it in local coordinates (the NURBS+FE master surface is only C0 across element
-#: faces: without this an iterate of 1e-8 h can carry the hit across the kink and back); a hit
-#: that converged outside it is then polished onto the element holding it (:func:`trace`), so
-#: the surface hit is always the continuous one
+#: faces: without this an iterate of 1e-8 h can carry the hit across the kink and back); the
+#: continuity check after a step polishes such hits onto the element holding them
+#: (:func:`trace` with ``polish``) to measure what the band changed
 STICKY = 2e-3
+#: the wider band of a hit whose master piece is held (it kept returning to pieces it had
+#: left within one increment: :data:`cgfem.contact.pair.MAX_MOVES`), in the same units
+#: (local coordinates of the element, barycentric coordinates of the triangle)
+HOLD_BAND = 0.25
 
 
 @njit(cache=True)
@@ -54,13 +58,13 @@ def master_point(k, uu, vv, layout, knots, control, origin, h, shape, elements, 
                  x, t):
     """:func:`master_point_in` with no preferred element."""
     return master_point_in(k, uu, vv, layout, knots, control, origin, h, shape, elements, tol,
-                           connectivity, u, x, t, -1)
+                           connectivity, u, x, t, -1, STICKY)
 
 
 @njit(cache=True)
-def sticky_xi(Q, prefer, origin, h, shape, elements, xi):
+def sticky_xi(Q, prefer, band, origin, h, shape, elements, xi):
     """Local coordinates ``xi`` (3,) of ``Q`` (3,) in active element ``prefer``; True if they lie
-    within ``1 + STICKY`` (the element is kept), False otherwise or if ``prefer < 0``."""
+    within ``1 + band`` (the element is kept), False otherwise or if ``prefer < 0``."""
     if prefer < 0:
         return False
     gid = elements[prefer]
@@ -70,17 +74,17 @@ def sticky_xi(Q, prefer, origin, h, shape, elements, xi):
     ok = True
     for d, c in ((0, ijk0), (1, ijk1), (2, ijk2)):
         xi[d] = (Q[d] - (origin[d] + (c + 0.5) * h)) / (0.5 * h)
-        if abs(xi[d]) > 1.0 + STICKY:
+        if abs(xi[d]) > 1.0 + band:
             ok = False
     return ok
 
 
 @njit(cache=True)
 def master_point_in(k, uu, vv, layout, knots, control, origin, h, shape, elements, tol, connectivity, u,
-                    x, t, prefer):
+                    x, t, prefer, band):
     """Current master point ``x`` (3,) and tangents ``t`` (2, 3) at ``(uu, vv)`` of patch ``k``
     (eq. 16): ``x = Q + N . U2``, ``t_alpha = Q_alpha + (grad N . Q_alpha) . U2``, in element
-    ``prefer`` if ``Q`` lies within its cube widened by ``STICKY`` (:func:`sticky_xi`), else in
+    ``prefer`` if ``Q`` lies within its cube widened by ``band`` (:func:`sticky_xi`), else in
     the element holding ``Q``. Returns the element's slot (-1: ``Q`` in no active element;
     ``x``, ``t`` then unset)."""
     SKL = np.empty((2, 2, 3))
@@ -90,7 +94,7 @@ def master_point_in(k, uu, vv, layout, knots, control, origin, h, shape, element
         Q[0, c] = SKL[0, 0, c]
     slot = np.empty(1, np.int64)
     xi = np.empty((1, 3))
-    if sticky_xi(Q[0], prefer, origin, h, shape, elements, xi[0]):
+    if sticky_xi(Q[0], prefer, band, origin, h, shape, elements, xi[0]):
         slot[0] = prefer
     else:
         locate(Q, origin, h, shape, elements, tol, slot, xi)
@@ -160,12 +164,14 @@ def wrap(a, lo, hi):
 
 
 @njit(cache=True, parallel=True)
-def trace(x1, n1, start_piece, start_theta, start_slot, max_gap, ray_tol, max_iter, layout, knots, control,
-          origin, h, shape, elements, tol, connectivity, u, found, piece, theta, g, slot, status, polish):
+def trace(x1, n1, start_piece, start_theta, start_slot, band, max_gap, ray_tol, max_iter, layout, knots,
+          control, origin, h, shape, elements, tol, connectivity, u, found, piece, theta, g, slot, status,
+          polish):
     """Per point ``p`` of ``x1``, ``n1`` (n, 3): :func:`ray_newton` from each start in turn;
     the first admissible hit (``|g| <= max_gap`` too) is written to ``found`` (n,) bool,
     ``piece`` (n,), ``theta`` (n, 2), ``g`` (n,), ``slot`` (n,) master element (others left as
-    they are); ``start_slot`` (n, c) the preferred element of each start (-1: none). ``status`` (n,)
+    they are); ``start_slot`` (n, c) the preferred element of each start (-1: none), kept while
+    the iterate lies within ``band`` (n,) of it (:func:`sticky_xi`). ``status`` (n,)
     gets :data:`OUTSIDE` where an iterate left the active elements, else 0. A hit converged
     in a preferred element is polished without it (:data:`STICKY`): the hit is on the
     continuous surface, in the element holding it, unless that polishing fails to converge
@@ -180,7 +186,7 @@ def trace(x1, n1, start_piece, start_theta, start_slot, max_gap, ray_tol, max_it
                 break
             r = ray_newton(x1[p], n1[p], k, start_theta[p, c, 0], start_theta[p, c, 1], 0.0, max_gap, ray_tol,
                            max_iter, layout, knots, control, origin, h, shape, elements, tol, connectivity,
-                           u, start_slot[p, c], out)
+                           u, start_slot[p, c], band[p], out)
             if polish and r == 1 and start_slot[p, c] >= 0:
                 # converged in the kept element, perhaps on its extension past a face: the
                 # same Newton in the elements holding the iterates (one evaluation if the hit
@@ -188,7 +194,7 @@ def trace(x1, n1, start_piece, start_theta, start_slot, max_gap, ray_tol, max_it
                 polished = np.empty(4)
                 r2 = ray_newton(x1[p], n1[p], k, out[0], out[1], out[2], max_gap, ray_tol, max_iter, layout,
                                 knots, control, origin, h, shape, elements, tol, connectivity, u, -1,
-                                polished)
+                                0.0, polished)
                 if r2 == 1:
                     for i in range(4):
                         out[i] = polished[i]
@@ -205,14 +211,14 @@ def trace(x1, n1, start_piece, start_theta, start_slot, max_gap, ray_tol, max_it
 
 @njit(cache=True)
 def ray_newton(x1, n1, k, u0, v0, g0, max_gap, ray_tol, max_iter, layout, knots, control, origin, h, shape,
-               elements, tol, connectivity, u, prefer, out):
+               elements, tol, connectivity, u, prefer, band, out):
     """Newton on ``x2(theta) - x1 - g n1 = 0`` from ``(u0, v0)`` on patch ``k``, ``g = g0``;
     a step leaving the patch's domain wraps around along a closed direction (``layout[k, 6:8]``)
     and is clipped onto the domain along an open one, and a clipped step that does not
     move is a stuck one. Stops converged (``|F| <= ray_tol h``), on a singular ``J``, a
     stuck step, ``|g| > 4 max_gap`` or after ``max_iter`` iterations. ``out`` (3,) receives
     ``(xi, eta, g, slot)`` (the master element of the hit: ``prefer``, the element of the
-    previous pairing, while ``Q`` lies within :data:`STICKY` of it, else the element holding
+    previous pairing, while ``Q`` lies within ``band`` of it, else the element holding
     ``Q``). Returns 1 converged with ``m2 . n1 < 0`` (``m2 = t_xi x t_eta``, the
     master normal against the ray), 0 not, ``-1 - OUTSIDE`` if an iterate left the active
     elements."""
@@ -230,7 +236,7 @@ def ray_newton(x1, n1, k, u0, v0, g0, max_gap, ray_tol, max_iter, layout, knots,
         # evaluated at theta clipped to the domain, as evaluate() does (iterates are inside
         # it; a start is taken as given)
         e = master_point_in(k, min(max(th0, lo0), hi0), min(max(th1, lo1), hi1), layout, knots, control,
-                            origin, h, shape, elements, tol, connectivity, u, x, t, prefer)
+                            origin, h, shape, elements, tol, connectivity, u, x, t, prefer, band)
         if e < 0:
             return -1 - OUTSIDE
         for c in range(3):

@@ -19,7 +19,7 @@ import scipy.sparse as sp
 
 from cgfem.contact.fitted import FitBlock, FittedSurface
 from cgfem.contact.pair import ContactPair, ContactPoints
-from cgfem.contact.surfaces import NurbsFeSurface
+from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface
 
 
 class ContactSet:
@@ -74,10 +74,11 @@ class ContactSet:
     def body(self, u: np.ndarray, i: int) -> np.ndarray:
         return u[self.offsets[i]:self.offsets[i + 1]]
 
-    def begin_pass(self) -> None:
-        """A new Newton solve: every pair's switch counts reset and held points released."""
+    def begin_pass(self, increment: bool = True) -> None:
+        """A new Newton solve: every pair's switch counts reset and held points released;
+        with ``increment`` (the first pass of an increment) the held master pieces too."""
         for p in self.pairs:
-            p.begin_pass()
+            p.begin_pass(increment)
 
     def contradicted(self) -> int:
         """Held points (all pairs) whose own rule disagrees with the status they hold."""
@@ -139,23 +140,31 @@ class ContactSet:
 
     def continuous(self, u: np.ndarray, r: np.ndarray) -> int:
         """Add to ``r`` (n,) in place the contact residual (and the fit constraints'
-        equations) at ``u`` with every NURBS+FE hit on the continuous surface, in the element
-        holding it, not on the extension of the element its pairing kept
-        (:data:`~cgfem.contact._ray_kernels.STICKY`); the recorded pairing is left as it is.
-        Returns how many active hits lay on such an extension."""
+        equations) at ``u`` with every hit on the continuous surface: a NURBS+FE hit in the
+        element holding it, a facet hit on the triangle the ray meets (a fresh search), not on
+        the extension of the piece its pairing kept (:data:`~cgfem.contact._ray_kernels.STICKY`,
+        ``HOLD_BAND``); the recorded pairing is left as it is. Returns how many active hits
+        lay on such an extension."""
         kept = [p.state.hits for p in self.pairs]
         extended = 0
         try:
             for k, p in enumerate(self.pairs):
-                if isinstance(p.surface, NurbsFeSurface) and p.state.hits is not None:
+                if p.state.hits is None or not isinstance(p.surface, (NurbsFeSurface, FacetSurface)):
+                    continue
+                if isinstance(p.surface, NurbsFeSurface):
                     p.surface.polish = True
                     try:
                         hits = p.search(*self._split(u, k))[1]
                     finally:
                         p.surface.polish = False
-                    if p.state.active is not None:
-                        extended += int(np.sum(p.state.active & (hits.slot != kept[k].slot)))
-                    p.state.hits = hits
+                    moved = hits.slot != kept[k].slot
+                else:
+                    p.state.hits = None
+                    hits = p.search(*self._split(u, k))[1]
+                    moved = hits.piece != kept[k].piece
+                if p.state.active is not None:
+                    extended += int(np.sum(p.state.active & moved))
+                p.state.hits = hits
             self.add(u, r, False)
         finally:
             for p, hits in zip(self.pairs, kept):

@@ -31,6 +31,15 @@ whatever its sign), so Newton sees a smooth problem and converges. The held stat
 contradict the point's own rule at the converged state; :meth:`ContactPair.contradicted`
 counts such points, and the outer loop does not call contact settled while there are any:
 its next pass releases every point and solves again from there.
+
+A hit can chatter the same way between two master pieces (triangles, or NURBS+FE elements)
+across the kink between them: where the equilibrium puts it on the kink, each piece's
+Newton step carries it onto the other. Once an active point's hit has moved to another
+piece :data:`MAX_MOVES` times within one increment, its piece is held: the search keeps it
+while the ray meets it within :data:`~cgfem.contact._ray_kernels.HOLD_BAND` of its edges
+(instead of ``STICKY``), on the piece's extension past the kink, for the rest of the
+increment (every pass of its outer loop). What that changes is measured after the step on
+the continuous surface (:meth:`~cgfem.contact.assembly.ContactSet.continuous`).
 """
 
 from __future__ import annotations
@@ -41,6 +50,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from cgfem.contact import _ray_kernels as _rk
 from cgfem.contact.kinematics import (SlaveFrames, area_weight, gap_derivatives, gap_gradient_direction,
                                       slave_state)
 from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface, RayHits, shape_derivatives
@@ -50,6 +60,9 @@ from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface, RayHits, shape_
 CHUNK_POINTS = 2048
 #: switches of one point's active status in one Newton solve before its status is held
 MAX_SWITCHES = 10
+#: moves of one active point's hit to another master piece in one increment before its piece
+#: is held (:data:`~cgfem.contact._ray_kernels.HOLD_BAND`)
+MAX_MOVES = 4
 #: largest |gap| searched, in element sizes: a point is active only while
 #: p_N + (kappa E / h) g <= 0, i.e. for gaps below |p_N| h / (kappa E), far below h
 MAX_GAP_H = 1.0
@@ -77,6 +90,10 @@ class ContactState:
     #: the Verlet list of the search (:meth:`ContactPair.candidates`): the slave points, the
     #: master samples and the kinematic vectors it was built at
     candidates: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+    #: per point, the moves of its hit to another master piece in this increment, and the
+    #: points whose piece is held (:data:`MAX_MOVES`)
+    moves: np.ndarray | None = None
+    piece_held: np.ndarray | None = None
     #: what changed between the last two linearization points: points that switched status,
     #: active points whose hit moved to another master piece (:func:`_master_key`)
     last_switched: int = 0
@@ -158,7 +175,9 @@ class ContactPair:
         st = self._slave(u_s)[1]
         rows, near = self.candidates(u_s, u_m, st.x)
         previous = None if self.state.hits is None else self.state.hits.select(rows)
-        sub = self.surface.search(u_m, st.x[rows], st.n[rows], self.max_gap, previous, near)
+        band = None if self.state.piece_held is None else \
+            np.where(self.state.piece_held[rows], _rk.HOLD_BAND, _rk.STICKY)
+        sub = self.surface.search(u_m, st.x[rows], st.n[rows], self.max_gap, previous, near, band)
         return st, RayHits.scatter(sub, rows, self.n_points)
 
     def candidates(self, u_s: np.ndarray, u_m: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -209,11 +228,14 @@ class ContactPair:
             stress = np.einsum("pij,pkj->pik", stress, F) / np.linalg.det(F)[:, None, None]
         self.state.p_N = np.einsum("pi,pij,pj->p", st.n, stress, st.n)
 
-    def begin_pass(self) -> None:
-        """A new Newton solve: switch counts to zero, every held point released."""
+    def begin_pass(self, increment: bool = True) -> None:
+        """A new Newton solve: switch counts to zero, every held status released; with
+        ``increment`` (its first pass) the held pieces too."""
         n = self.n_points
         self.state.switches = np.zeros(n, np.int64)
         self.state.held, self.state.held_active = np.zeros(n, bool), np.zeros(n, bool)
+        if increment or self.state.moves is None:
+            self.state.moves, self.state.piece_held = np.zeros(n, np.int64), np.zeros(n, bool)
 
     def contradicted(self) -> int:
         """Held points whose own rule disagrees with the status they hold (last
@@ -297,6 +319,9 @@ class ContactPair:
             # st.hits: the pairing recorded with st.active
             moved = active & st.active & np.any(_master_key(hits) != _master_key(st.hits), axis=1)
             st.last_switched, st.last_moved = int(np.count_nonzero(switched)), int(np.count_nonzero(moved))
+            if st.moves is not None:
+                st.moves += moved
+                st.piece_held |= st.moves >= MAX_MOVES
             if st.switches is not None:
                 st.switches += switched
                 if st.held is not None:

@@ -194,7 +194,8 @@ class RaySurface:
         return self._seed_positions(u), 2.0 * self.spacing
 
     def search(self, u: np.ndarray, x1: np.ndarray, n1: np.ndarray, max_gap: float,
-               previous: RayHits | None = None, near: np.ndarray | None = None) -> RayHits:
+               previous: RayHits | None = None, near: np.ndarray | None = None,
+               band: np.ndarray | None = None) -> RayHits:
         """Ray tracing from ``x1`` along ``n1`` (n, 3) to the current master surface, the
         segment ``|g| <= max_gap`` of each ray. Starts, in order: the previous pairing (if
         found; tried alone first, the seeds are looked up only for the rays it does not
@@ -204,8 +205,10 @@ class RaySurface:
         admissible hit of a point is kept (:func:`cgfem.contact._ray_kernels.trace`).
         ``near``: the seeds (indices of :meth:`samples`) that may start a ray (every seed
         within reach of the rays; default all, and then rays out of reach of the master's
-        element boxes are skipped first, :meth:`_may_hit`)."""
+        element boxes are skipped first, :meth:`_may_hit`). ``band`` (n,): how far past its
+        faces the previous pairing's element is kept (default :data:`~._ray_kernels.STICKY`)."""
         n = x1.shape[0]
+        band = np.full(n, _rk.STICKY) if band is None else np.asarray(band, float)
         best = RayHits(np.zeros(n, bool), np.zeros(n, np.int64), np.zeros((n, 2)), np.full(n, np.inf),
                        np.full(n, -1, np.int64))
         todo = np.arange(n)
@@ -215,7 +218,7 @@ class RaySurface:
             rows = np.flatnonzero(previous.found)
             before = previous.slot[rows] if previous.slot is not None else np.full(rows.size, -1, np.int64)
             self._trace(u, x1, n1, rows, previous.piece[rows][:, None], previous.theta[rows][:, None],
-                        before[:, None], max_gap, best)
+                        before[:, None], band[rows], max_gap, best)
             todo = np.flatnonzero(~best.found)
         if near is None and todo.size:
             rows = todo[self._may_hit(u, x1[todo], max_gap, n1[todo])]
@@ -224,13 +227,16 @@ class RaySurface:
         if rows.size:
             piece, theta = self._starts(u, np.ascontiguousarray(x1[rows], dtype=float),
                                         np.ascontiguousarray(n1[rows], dtype=float), max_gap, near)
-            self._trace(u, x1, n1, rows, piece, theta, np.full(piece.shape, -1, np.int64), max_gap, best)
+            self._trace(u, x1, n1, rows, piece, theta, np.full(piece.shape, -1, np.int64), band[rows], max_gap,
+                        best)
         return best
 
     def _trace(self, u: np.ndarray, x1: np.ndarray, n1: np.ndarray, rows: np.ndarray, piece: np.ndarray,
-               theta: np.ndarray, start_slot: np.ndarray, max_gap: float, best: RayHits) -> None:
+               theta: np.ndarray, start_slot: np.ndarray, band: np.ndarray, max_gap: float,
+               best: RayHits) -> None:
         """Newton from the starts ``piece`` (k, c), ``theta`` (k, c, 2), ``start_slot`` (k, c)
-        of the rays ``rows`` (k,); their first admissible hits written into ``best``."""
+        (kept within ``band`` (k,) of their faces) of the rays ``rows`` (k,); their first
+        admissible hits written into ``best``."""
         k = rows.size
         found, pc, th, g = np.zeros(k, bool), np.zeros(k, np.int64), np.zeros((k, 2)), np.full(k, np.inf)
         status = np.zeros(k, np.int64)
@@ -238,7 +244,7 @@ class RaySurface:
         control, origin, h, shape, elements, connectivity, nodal, ray_tol = self._kernel_data(u)
         _rk.trace(np.ascontiguousarray(x1[rows], dtype=float), np.ascontiguousarray(n1[rows], dtype=float),
                   np.ascontiguousarray(piece), np.ascontiguousarray(theta),
-                  np.ascontiguousarray(start_slot), float(max_gap), ray_tol,
+                  np.ascontiguousarray(start_slot), np.ascontiguousarray(band, dtype=float), float(max_gap), ray_tol,
                   MAX_RAY_NEWTON, self._layout, self._knots, control, origin, h, shape, elements, LOCATE_TOL,
                   connectivity, nodal, found, pc, th, g, slot, status, self.polish)
         if np.any(status == _rk.OUTSIDE):
@@ -481,13 +487,14 @@ class FacetSurface:
         return centroid, float(np.linalg.norm(verts - centroid[:, None], axis=2).max(initial=0.0))
 
     def search(self, u: np.ndarray, x1: np.ndarray, n1: np.ndarray, max_gap: float,
-               previous: RayHits | None = None, near: np.ndarray | None = None) -> RayHits:
+               previous: RayHits | None = None, near: np.ndarray | None = None,
+               band: np.ndarray | None = None) -> RayHits:
         """Nearest admissible hit of each ray ``x1 + g n1`` (n, 3) on the current triangles.
         A point whose ``previous`` hit lay on a triangle keeps it while the ray meets that
         triangle's plane within ``STICKY`` (barycentric) of its edges: a hit on an edge
         otherwise jumps between the two triangles' normals from one Newton iterate to the
         next. ``near``: the triangles (indices of :meth:`samples`) the rays may hit (default
-        all)."""
+        all). ``band`` (n,): the band of each ray's kept triangle (default ``STICKY``)."""
         n = x1.shape[0]
         cand = self.candidates if near is None else self.candidates[near]
         best = RayHits(np.zeros(n, bool), np.zeros(n, np.int64), np.zeros((n, 2)), np.full(n, np.inf),
@@ -504,7 +511,8 @@ class FacetSurface:
             rows = np.flatnonzero(previous.found)
             tris = local[previous.piece[rows]]
             rows, tris = rows[tris >= 0], tris[tris >= 0]
-            self._take(best, cand, *self._hits(x1, n1, rows, tris, verts, _rk.STICKY, max_gap), nearest=False)
+            width = _rk.STICKY if band is None else np.asarray(band, float)[rows]
+            self._take(best, cand, *self._hits(x1, n1, rows, tris, verts, width, max_gap), nearest=False)
             todo = np.flatnonzero(~best.found)
         if todo.size == 0:
             return best
@@ -518,9 +526,10 @@ class FacetSurface:
         return best
 
     def _hits(self, x1: np.ndarray, n1: np.ndarray, rows: np.ndarray, tris: np.ndarray, verts: np.ndarray,
-              band: float, max_gap: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+              band: float | np.ndarray, max_gap: float
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Admissible hits of the pairs (ray ``rows[k]``, triangle ``tris[k]`` of ``verts``):
-        barycentric coordinates within ``band`` of the triangle, normal against the ray,
+        barycentric coordinates within ``band`` (a number, or one per pair) of the triangle, normal against the ray,
         ``|g| <= max_gap``. Returns the pairs that hit: their rays, triangles, ``l1``, ``l2``
         and ``g``."""
         v = verts[tris]

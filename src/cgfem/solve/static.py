@@ -58,9 +58,10 @@ class StepRecord:
     #: the system's whole vector of unknowns: the bodies' ``u`` followed by the contact
     #: set's own unknowns (the fitted surfaces of ``nurbs_fit``, :attr:`System.n_dofs`)
     unknowns: np.ndarray | None = field(default=None, repr=False)
-    #: Newton's force scale; the residual over it at the converged state with every NURBS+FE
-    #: master hit on the continuous surface (not on a kept element's extension past a grid
-    #: face, :data:`~cgfem.contact._ray_kernels.STICKY`); the active hits that were on one
+    #: Newton's force scale; the residual over it at the converged state with every master
+    #: hit on the continuous surface (not on the extension of the element or triangle its
+    #: pairing kept, :data:`~cgfem.contact._ray_kernels.STICKY`, ``HOLD_BAND``); the active
+    #: hits that were on one
     reference: float = 0.0
     continuous_residual: float = 0.0
     extended_hits: int = 0
@@ -87,8 +88,8 @@ class Increment:
     newton_residuals: list[list[float]]
     outer_changes: list[float]
     outer_converged: bool
-    #: Newton's force scale, and the residual over it with every NURBS+FE hit on the continuous
-    #: surface, with the number of active hits that lie on a kept element's extension
+    #: Newton's force scale, and the residual over it with every master hit on the continuous
+    #: surface, with the number of active hits that lie on a kept piece's extension
     reference: float = 0.0
     continuous_residual: float = 0.0
     extended_hits: int = 0
@@ -175,9 +176,9 @@ class System:
 
     def continuous_residual(self, u: np.ndarray, t: float, frozen_stress: list[np.ndarray | None]
                             ) -> tuple[np.ndarray, int]:
-        """The residual at ``u`` with every NURBS+FE hit on the continuous surface, in the
-        element holding it (:meth:`~cgfem.contact.assembly.ContactSet.continuous`), and how
-        many active hits lie on a kept element's extension instead."""
+        """The residual at ``u`` with every master hit on the continuous surface, in the
+        element or triangle holding it (:meth:`~cgfem.contact.assembly.ContactSet.continuous`),
+        and how many active hits lie on a kept piece's extension instead."""
         parts = [b.assemble(ub, t, s, False) for b, ub, s in zip(self.bodies, self.split(u), frozen_stress)]
         r = np.concatenate([p[0] for p in parts] + [np.zeros(self.contact.n_extra)])
         return r, self.contact.continuous(u, r)
@@ -422,9 +423,9 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
                                 time.perf_counter() - start, u.copy(), outcome.reference,
                                 outcome.continuous_residual, outcome.extended_hits)
             if outcome.extended_hits and outcome.continuous_residual > options.newton_tol:
-                log(f"warning: t={t:.4g}: {outcome.extended_hits} active hits lie on a kept master element's "
-                    f"extension past a grid face; on the continuous NURBS+FE surface |r|/ref = "
-                    f"{outcome.continuous_residual:.3e} > newton_tol = {options.newton_tol:.1e}")
+                log(f"warning: t={t:.4g}: {outcome.extended_hits} active hits lie on the extension of the "
+                    f"master piece (element or triangle) their pairing kept; on the continuous surface "
+                    f"|r|/ref = {outcome.continuous_residual:.3e} > newton_tol = {options.newton_tol:.1e}")
             records.append(record)
             if on_step:
                 on_step(record)
@@ -460,7 +461,7 @@ def _solve_increment(system: System, solver: _Solver, u0: np.ndarray,
         frozen = following
         if contact:
             contact.freeze(u, frozen)      # p_N = n . sigma* . n, with the same frozen sigma*
-            contact.begin_pass()
+            contact.begin_pass(increment=outer == 1)
 
         def assemble(v, tangent, frozen=frozen):
             return system.assemble(v, t, frozen, tangent)
