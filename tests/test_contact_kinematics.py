@@ -172,3 +172,43 @@ def test_candidate_list_keeps_every_hit(definition):
     far = u - 10.0 * pair.max_gap * down                    # lifted far off the sphere
     assert not same_as_full(far).found.any()
     assert pair.state.candidates[0].size == 0 and pair.state.candidates[1].size == 0
+
+
+def test_hits_that_keep_changing_piece_are_held(definition):
+    """Active hits that move to another master piece (triangle, or NURBS+FE element) at every
+    linearization point are held on their piece after MAX_MOVES moves: at the other state
+    they stay on it, on its extension past the kink (still exactly on their ray), while
+    every other hit is the search's own; later passes of the increment keep the hold, a new
+    increment releases it."""
+    from cgfem.contact.pair import MAX_MOVES, _master_key
+    pair = _pair(definition, False)
+    n_s, n_m = pair.slave_space.n_dofs, pair.master_space.n_dofs
+    rng = np.random.default_rng(6)
+    u0 = 0.01 * rng.standard_normal(n_s + n_m)
+    u1 = u0.copy()
+    u1[:n_s] += 0.004 * rng.standard_normal(n_s)
+    pair.state.p_N = np.zeros(pair.n_points)
+    pair.begin_pass()
+    states = [u0 if k % 2 == 0 else u1 for k in range(MAX_MOVES + 1)]    # ends at u0
+    keys, active = [], []
+    for u in states:
+        pair.assemble(*np.split(u, [n_s]), True)
+        keys.append(_master_key(pair.state.hits))
+        active.append(pair.state.active.copy())
+    moves = sum(a & b & np.any(k != l, axis=1) for a, b, k, l in zip(active, active[1:], keys, keys[1:]))
+    moving = moves >= MAX_MOVES                                # moved at every evaluation
+    assert moving.sum() >= 3                                   # the scene moves some hits
+    np.testing.assert_array_equal(pair.state.piece_held, moving)
+    both = active[-1] & active[-2]
+    # at u1 the held hits keep u0's piece, on its extension, exactly on their ray
+    pair.begin_pass(increment=False)                           # a later pass: still held
+    x = pair._slave(u1[:n_s])[1]
+    hits = pair.search(*np.split(u1, [n_s]))[1]
+    np.testing.assert_array_equal(_master_key(hits)[moving], keys[-1][moving])
+    mp = pair.surface.evaluate(u1[n_s:], hits.piece[moving], hits.theta[moving], second=False,
+                               slot=None if hits.slot is None else hits.slot[moving])
+    np.testing.assert_allclose(mp.x, x.x[moving] + hits.g[moving, None] * x.n[moving], rtol=0.0, atol=1e-10)
+    # not held: the hit the search finds without the hold
+    np.testing.assert_array_equal(_master_key(hits)[both & ~moving], keys[-2][both & ~moving])
+    pair.begin_pass()                                          # a new increment
+    assert not pair.state.piece_held.any() and not pair.state.moves.any()

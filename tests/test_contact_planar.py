@@ -42,7 +42,7 @@ def test_contact_force_balances_the_tractions(tmp_path, surface, level):
     # peak at their chamfered edges
     assert 1e7 < step["contact"]["max_pressure"] < (2e8 if surface == "nurbs_fe" else 1e9)
     # the residual with every hit on the continuous surface: Newton's own last one unless an
-    # active hit lies on a kept element's extension (facets: never counted)
+    # active hit lies on the extension of a kept element or triangle
     last = step["pass_residuals"][-1][-1] / step["newton_reference"]
     assert step["contact"]["continuous_residual"] <= case.solver.newton_tol
     if step["contact"]["extended_hits"] == 0:
