@@ -108,20 +108,27 @@ def test_gap_is_the_distance_along_the_normal(definition):
         assert 1e-5 < error < 0.02      # facets chord error ~ h^2 / (8 R) with h = 0.25
 
 
+def _two_states(definition: str, seed: int) -> tuple[ContactPair, int, np.ndarray, np.ndarray]:
+    """A small-strain pair with ``p_N = 0`` at the start of an increment, and two nearby
+    states of its unknowns (the slave moved by 0.004 between them): ``(pair, n_s, u0, u1)``."""
+    pair = _pair(definition, False)
+    n_s, n_m = pair.slave_space.n_dofs, pair.master_space.n_dofs
+    rng = np.random.default_rng(seed)
+    u0 = 0.01 * rng.standard_normal(n_s + n_m)
+    u1 = u0.copy()
+    u1[:n_s] += 0.004 * rng.standard_normal(n_s)
+    pair.state.p_N = np.zeros(pair.n_points)
+    pair.begin_pass()
+    return pair, n_s, u0, u1
+
+
 def test_chattering_points_are_held_then_released():
     """Points whose status flips at every linearization point are held after MAX_SWITCHES
     flips, as they were, in the residual too (an active one keeps lambda = p_N + eps g even in
     tension); ``contradicted`` counts held points against their own rule; a new pass releases
     them."""
     from cgfem.contact.pair import MAX_SWITCHES
-    pair = _pair("nurbs_fe", False)
-    n_s, n_m = pair.slave_space.n_dofs, pair.master_space.n_dofs
-    rng = np.random.default_rng(5)
-    u0 = 0.01 * rng.standard_normal(n_s + n_m)
-    u1 = u0.copy()
-    u1[:n_s] += 0.004 * rng.standard_normal(n_s)
-    pair.state.p_N = np.zeros(pair.n_points)
-    pair.begin_pass()
+    pair, n_s, u0, u1 = _two_states("nurbs_fe", 5)
     states = []
     for k in range(MAX_SWITCHES + 2):
         pair.assemble(*(np.split(u0 if k % 2 == 0 else u1, [n_s])), True)
@@ -181,14 +188,7 @@ def test_hits_that_keep_changing_piece_are_held(definition):
     every other hit is the search's own; later passes of the increment keep the hold, a new
     increment releases it."""
     from cgfem.contact.pair import MAX_MOVES, _master_key
-    pair = _pair(definition, False)
-    n_s, n_m = pair.slave_space.n_dofs, pair.master_space.n_dofs
-    rng = np.random.default_rng(6)
-    u0 = 0.01 * rng.standard_normal(n_s + n_m)
-    u1 = u0.copy()
-    u1[:n_s] += 0.004 * rng.standard_normal(n_s)
-    pair.state.p_N = np.zeros(pair.n_points)
-    pair.begin_pass()
+    pair, n_s, u0, u1 = _two_states(definition, 6)
     states = [u0 if k % 2 == 0 else u1 for k in range(MAX_MOVES + 1)]    # ends at u0
     keys, active = [], []
     for u in states:
