@@ -182,23 +182,28 @@ def test_candidate_list_keeps_every_hit(definition):
 
 
 def test_hits_that_keep_changing_piece_are_held(definition):
-    """Active hits that move to another master piece (triangle, or NURBS+FE element) at every
-    linearization point are held on their piece after MAX_MOVES moves: at the other state
-    they stay on it, on its extension past the kink (still exactly on their ray), while
-    every other hit is the search's own; later passes of the increment keep the hold, a new
-    increment releases it."""
-    from cgfem.contact.pair import MAX_MOVES, _master_key
+    """Active hits that go back and forth between two master pieces (triangles, or NURBS+FE
+    elements) at every linearization point are held on their piece after MAX_RETURNS
+    returns: at the other state they stay on it, on its extension past the kink (still
+    exactly on their ray), while every other hit is the search's own; later passes of the
+    increment keep the hold, a new increment releases it."""
+    from cgfem.contact.pair import MAX_RETURNS, _master_key
     pair, n_s, u0, u1 = _two_states(definition, 6)
-    states = [u0 if k % 2 == 0 else u1 for k in range(MAX_MOVES + 1)]    # ends at u0
+    states = [u0 if k % 2 == 0 else u1 for k in range(MAX_RETURNS + 2)]
+    assert states[-1] is u0
     keys, active = [], []
     for u in states:
         pair.assemble(*np.split(u, [n_s]), True)
         keys.append(_master_key(pair.state.hits))
         active.append(pair.state.active.copy())
-    moves = sum(a & b & np.any(k != l, axis=1) for a, b, k, l in zip(active, active[1:], keys, keys[1:]))
-    moving = moves >= MAX_MOVES                                # moved at every evaluation
-    assert moving.sum() >= 3                                   # the scene moves some hits
-    np.testing.assert_array_equal(pair.state.piece_held, moving)
+    # A, B, A, B, A: one move and MAX_RETURNS returns
+    always = np.logical_and.reduce(active)
+    back_and_forth = always & np.logical_and.reduce(
+        [np.any(k != l, axis=1) for k, l in zip(keys, keys[1:])]
+        + [np.all(k == l, axis=1) for k, l in zip(keys, keys[2:])])
+    assert back_and_forth.sum() >= 3                           # the scene moves some hits
+    np.testing.assert_array_equal(pair.state.piece_held, back_and_forth)
+    moving = back_and_forth
     both = active[-1] & active[-2]
     # at u1 the held hits keep u0's piece, on its extension, exactly on their ray
     pair.begin_pass(increment=False)                           # a later pass: still held
@@ -211,4 +216,4 @@ def test_hits_that_keep_changing_piece_are_held(definition):
     # not held: the hit the search finds without the hold
     np.testing.assert_array_equal(_master_key(hits)[both & ~moving], keys[-2][both & ~moving])
     pair.begin_pass()                                          # a new increment
-    assert not pair.state.piece_held.any() and not pair.state.moves.any()
+    assert not pair.state.piece_held.any() and not pair.state.returns.any()

@@ -37,8 +37,8 @@ OUTSIDE = 1
 #: continuity check after a step polishes such hits onto the element holding them
 #: (:func:`trace` with ``polish``) to measure what the band changed
 STICKY = 2e-3
-#: the wider band of a hit whose master piece is held (it kept returning to pieces it had
-#: left within one increment: :data:`cgfem.contact.pair.MAX_MOVES`), in the same units
+#: the wider band of a hit whose master piece is held (it kept returning to the piece it had
+#: just left within one increment: :data:`cgfem.contact.pair.MAX_RETURNS`), in the same units
 #: (local coordinates of the element, barycentric coordinates of the triangle)
 HOLD_BAND = 0.25
 

@@ -34,8 +34,9 @@ its next pass releases every point and solves again from there.
 
 A hit can chatter the same way between two master pieces (triangles, or NURBS+FE elements)
 across the kink between them: where the equilibrium puts it on the kink, each piece's
-Newton step carries it onto the other. Once an active point's hit has moved to another
-piece :data:`MAX_MOVES` times within one increment, its piece is held: the search keeps it
+Newton step carries it onto the other. Once an active point's hit has returned
+:data:`MAX_RETURNS` times to the piece it had just left (A to B and back to A counts one;
+a hit sliding on over A, B, C, ... counts none) within one increment, its piece is held: the search keeps it
 while the ray meets it within :data:`~cgfem.contact._ray_kernels.HOLD_BAND` of its edges
 (instead of ``STICKY``), on the piece's extension past the kink, for the rest of the
 increment (every pass of its outer loop). What that changes is measured after the step on
@@ -60,9 +61,9 @@ from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface, RayHits, shape_
 CHUNK_POINTS = 2048
 #: switches of one point's active status in one Newton solve before its status is held
 MAX_SWITCHES = 10
-#: moves of one active point's hit to another master piece in one increment before its piece
-#: is held (:data:`~cgfem.contact._ray_kernels.HOLD_BAND`)
-MAX_MOVES = 4
+#: returns of one active point's hit to the master piece it had just left, in one increment,
+#: before its piece is held (:data:`~cgfem.contact._ray_kernels.HOLD_BAND`)
+MAX_RETURNS = 3
 #: largest |gap| searched, in element sizes: a point is active only while
 #: p_N + (kappa E / h) g <= 0, i.e. for gaps below |p_N| h / (kappa E), far below h
 MAX_GAP_H = 1.0
@@ -90,9 +91,11 @@ class ContactState:
     #: the Verlet list of the search (:meth:`ContactPair.candidates`): the slave points, the
     #: master samples and the kinematic vectors it was built at
     candidates: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
-    #: per point, the moves of its hit to another master piece in this increment, and the
-    #: points whose piece is held (:data:`MAX_MOVES`)
-    moves: np.ndarray | None = None
+    #: per point, the piece its hit left at its last move (:func:`_master_key`; -1: none
+    #: yet), the returns to such a piece in this increment, and the points whose piece is
+    #: held (:data:`MAX_RETURNS`)
+    left: np.ndarray | None = None
+    returns: np.ndarray | None = None
     piece_held: np.ndarray | None = None
     #: what changed between the last two linearization points: points that switched status,
     #: active points whose hit moved to another master piece (:func:`_master_key`)
@@ -234,8 +237,9 @@ class ContactPair:
         n = self.n_points
         self.state.switches = np.zeros(n, np.int64)
         self.state.held, self.state.held_active = np.zeros(n, bool), np.zeros(n, bool)
-        if increment or self.state.moves is None:
-            self.state.moves, self.state.piece_held = np.zeros(n, np.int64), np.zeros(n, bool)
+        if increment or self.state.returns is None:
+            self.state.left = np.full((n, 2), -1, np.int64)
+            self.state.returns, self.state.piece_held = np.zeros(n, np.int64), np.zeros(n, bool)
 
     def contradicted(self) -> int:
         """Held points whose own rule disagrees with the status they hold (last
@@ -317,11 +321,13 @@ class ContactPair:
         if st.active is not None:
             switched = active != st.active
             # st.hits: the pairing recorded with st.active
-            moved = active & st.active & np.any(_master_key(hits) != _master_key(st.hits), axis=1)
+            key, before = _master_key(hits), _master_key(st.hits)
+            moved = active & st.active & np.any(key != before, axis=1)
             st.last_switched, st.last_moved = int(np.count_nonzero(switched)), int(np.count_nonzero(moved))
-            if st.moves is not None:
-                st.moves += moved
-                st.piece_held |= st.moves >= MAX_MOVES
+            if st.returns is not None:
+                st.returns += moved & np.all(key == st.left, axis=1)
+                st.left[moved] = before[moved]
+                st.piece_held |= st.returns >= MAX_RETURNS
             if st.switches is not None:
                 st.switches += switched
                 if st.held is not None:
