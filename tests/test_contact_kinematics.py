@@ -217,3 +217,26 @@ def test_hits_that_keep_changing_piece_are_held(definition):
     np.testing.assert_array_equal(_master_key(hits)[both & ~moving], keys[-2][both & ~moving])
     pair.begin_pass()                                          # a new increment
     assert not pair.state.piece_held.any() and not pair.state.returns.any()
+
+
+def test_only_hits_going_back_are_held():
+    """The hold counts returns to the piece a hit has just left, not moves: over five
+    linearization points a hit going back and forth (A B A B A: 3 returns) is held, one
+    sliding on (A B C D E) is not, nor one that came back once and stayed (A B A A A)."""
+    from cgfem.contact.pair import MAX_RETURNS
+    from cgfem.contact.surfaces import RayHits
+    assert MAX_RETURNS == 3
+    pair = _pair("facets", False)
+    n = pair.n_points
+    pair.begin_pass()
+    paths = {0: [1, 2, 1, 2, 1], 1: [1, 2, 3, 4, 5], 2: [1, 2, 1, 1, 1]}
+    active = np.zeros(n, bool)
+    active[list(paths)] = True
+    for k in range(5):
+        piece = np.zeros(n, np.int64)
+        for p, path in paths.items():
+            piece[p] = path[k]
+        hits = RayHits(active.copy(), piece, np.zeros((n, 2)), np.zeros(n), np.zeros(n, np.int64))
+        pair._record(hits, active.copy(), active.copy())
+    np.testing.assert_array_equal(np.flatnonzero(pair.state.piece_held), [0])
+    np.testing.assert_array_equal(pair.state.returns[:3], [3, 0, 1])
