@@ -92,15 +92,19 @@ class ContactState:
     #: master samples and the kinematic vectors it was built at
     candidates: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
     #: per point, the piece its hit left at its last move (:func:`_master_key`; -1: none
-    #: yet), the returns to such a piece in this increment, and the points whose piece is
-    #: held (:data:`MAX_RETURNS`)
+    #: yet) and the returns to such a piece in this increment (:attr:`piece_held`)
     left: np.ndarray | None = None
     returns: np.ndarray | None = None
-    piece_held: np.ndarray | None = None
     #: what changed between the last two linearization points: points that switched status,
     #: active points whose hit moved to another master piece (:func:`_master_key`)
     last_switched: int = 0
     last_moved: int = 0
+
+    @property
+    def piece_held(self) -> np.ndarray | None:
+        """(n,) the points whose master piece is held: :data:`MAX_RETURNS` returns in this
+        increment (None before the first pass)."""
+        return None if self.returns is None else self.returns >= MAX_RETURNS
 
 
 @dataclass(frozen=True)
@@ -178,8 +182,8 @@ class ContactPair:
         st = self._slave(u_s)[1]
         rows, near = self.candidates(u_s, u_m, st.x)
         previous = None if self.state.hits is None else self.state.hits.select(rows)
-        band = None if self.state.piece_held is None else \
-            np.where(self.state.piece_held[rows], _rk.HOLD_BAND, _rk.STICKY)
+        held = self.state.piece_held
+        band = None if held is None else np.where(held[rows], _rk.HOLD_BAND, _rk.STICKY)
         sub = self.surface.search(u_m, st.x[rows], st.n[rows], self.max_gap, previous, near, band)
         return st, RayHits.scatter(sub, rows, self.n_points)
 
@@ -239,7 +243,7 @@ class ContactPair:
         self.state.held, self.state.held_active = np.zeros(n, bool), np.zeros(n, bool)
         if increment or self.state.returns is None:
             self.state.left = np.full((n, 2), -1, np.int64)
-            self.state.returns, self.state.piece_held = np.zeros(n, np.int64), np.zeros(n, bool)
+            self.state.returns = np.zeros(n, np.int64)
 
     def contradicted(self) -> int:
         """Held points whose own rule disagrees with the status they hold (last
@@ -327,7 +331,6 @@ class ContactPair:
             if st.returns is not None:
                 st.returns += moved & np.all(key == st.left, axis=1)
                 st.left[moved] = before[moved]
-                st.piece_held |= st.returns >= MAX_RETURNS
             if st.switches is not None:
                 st.switches += switched
                 if st.held is not None:
