@@ -320,11 +320,13 @@ def _write_fits(out: Path, system: System, record: StepRecord, number: int) -> d
 
 def _floating_summary(system: System, record: StepRecord, unknowns: np.ndarray) -> dict:
     """Per body held by contact alone in some rigid motion: how many rigid motions its own
-    conditions leave free, the stabilizing force (zero: the shift acts on the tangent only,
-    :meth:`~cgfem.solve.static.System._floating_shift`) and the norm of the force its
-    equations leave unbalanced at the converged state (N), to compare with the contact force."""
+    conditions leave free, the stabilizing force (the norm of the force the tangent shift put
+    into the increment's last Newton step, :attr:`~cgfem.solve.static.System.stabilizing`; the
+    residual never carries it) and the norm of the force its equations leave unbalanced at the
+    converged state (N), to compare with the contact force."""
     r = system.split(system.assemble(unknowns, record.load_factor, record.frozen_stress, False)[0])
-    return {system.bodies[i].name: {"free_modes": system.free_modes.get(i, 0), "stabilizing_force": 0.0,
+    return {system.bodies[i].name: {"free_modes": system.free_modes.get(i, 0),
+                                    "stabilizing_force": system.stabilizing.get(i, 0.0),
                                     "residual": float(np.linalg.norm(r[i]))} for i in system.floating}
 
 

@@ -119,6 +119,11 @@ class System:
         #: the floating bodies' shift multiplier, raised when a step had to be limited
         #: (:meth:`limit_step`), lowered again while steps are not
         self.damping = 1.0
+        #: the multiplier of the floating bodies' shift in the last tangent, and per floating
+        #: body the norm of the force that shift applied in the last Newton step of the
+        #: increment (:meth:`limit_step`; N, vanishing with the step)
+        self._scale = 0.0
+        self.stabilizing: dict[int, float] = {}
         #: the shift factor of the last tangent (:meth:`_shift_factor`)
         self._fading = 1.0
 
@@ -171,7 +176,8 @@ class System:
                 self.floating = [i for i, n in self.free_modes.items() if n]
             K = K + Kc.tocsr()
             if self.floating:
-                K = K + self.damping * self._shift_factor(t, float(np.linalg.norm(r))) * self._floating_shift(K)
+                self._scale = self.damping * self._shift_factor(t, float(np.linalg.norm(r)))
+                K = K + self._scale * self._floating_shift(K)
         return r, K
 
     def continuous_residual(self, u: np.ndarray, t: float, frozen_stress: list[np.ndarray | None]
@@ -191,6 +197,7 @@ class System:
         if self._largest is None or self._largest[0] != t:
             self._largest = (t, norm)
             self.damping = 1.0
+            self.stabilizing = {}
         self._largest = (t, max(self._largest[1], norm))
         self._fading = shift_factor(norm, self._largest[1])
         return self._fading
@@ -211,10 +218,16 @@ class System:
         ``1 / DAMPING_DECAY`` again, down to 1. The soft rigid step then shrinks inside the
         solve, where the other bodies follow it, instead of every body's step being scaled
         with it (chain3 at level 2 with nurbs_fit: full load in 17 iterations instead of 30
-        with steps cut to 5-8 % and a cut-back)."""
+        with steps cut to 5-8 % and a cut-back). Records :attr:`stabilizing`: the norm of
+        ``scale * shift . du`` per floating body, the force the shift put into this step's
+        linear system."""
         factor = 1.0
+        shift = None if not self.floating or self._shift is None else self._shift.diagonal()
         for i in self.floating or ():
-            move = float(np.abs(du[self.offsets[i]:self.offsets[i + 1]]).max(initial=0.0))
+            a, b = self.offsets[i], self.offsets[i + 1]
+            if shift is not None:
+                self.stabilizing[i] = float(np.linalg.norm(self._scale * shift[a:b] * du[a:b]))
+            move = float(np.abs(du[a:b]).max(initial=0.0))
             allowed = FLOATING_STEP * self.bodies[i].space.h
             if move > allowed:
                 factor = min(factor, allowed / move)
