@@ -1,11 +1,13 @@
-"""The outer loop's fixed-point relaxation (Aitken / Irons-Tuck) on affine maps."""
+"""The outer loop: its fixed-point relaxation (Aitken / Irons-Tuck) on affine maps, and the
+Newton attempts of a pass (modified Newton first, then full Newton from its best point)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from cgfem.solve.static import Relaxation
+from cgfem.solve.newton import NewtonResult
+from cgfem.solve.static import Relaxation, newton_pass
 
 
 @pytest.mark.parametrize("a", [0.6, -0.5, 0.2])
@@ -42,3 +44,45 @@ def test_relaxation_starts_plain_and_bounds_its_factor():
     assert relax.omega == Relaxation.OMEGA_MAX
     assert np.allclose(x[0], 1.0 + 4.0 * 0.95)            # x1 + omega r1, r1 = 0.95 b
     assert abs(x[0] - 20.0).max() < abs(0.95 + 1.0 - 20.0)  # nearer than plain substitution
+
+
+def _attempts(modified: NewtonResult, full: NewtonResult):
+    calls = []
+
+    def attempt(start, fixed_tangent):
+        calls.append((start.copy(), fixed_tangent))
+        return modified if fixed_tangent else full
+    return attempt, calls
+
+
+def test_full_newton_goes_on_from_where_modified_newton_got_to():
+    u0 = np.zeros(3)
+    modified = NewtonResult(np.full(3, 0.9), False, [1e-3, 1e-4, 1e-5, 1e-6], 1.0, "max_iterations")
+    full = NewtonResult(np.ones(3), True, [1e-6, 1e-12], 1.0, "converged")
+    attempt, calls = _attempts(modified, full)
+    result, history = newton_pass(attempt, u0, modified_first=True)
+    assert result is full
+    assert [f for _, f in calls] == [True, False]
+    np.testing.assert_array_equal(calls[1][0], modified.u)       # not the pass's start
+    assert history == [1e-3, 1e-4, 1e-5, 1e-6, 1e-12]             # the shared iterate once
+
+
+def test_full_newton_restarts_when_modified_newton_went_up():
+    u0 = np.zeros(3)
+    for reason, residuals in [("max_iterations", [1e-3, 1e-2]), ("line_search", [1e-3, 1e-4])]:
+        modified = NewtonResult(np.full(3, 0.9), False, residuals, 1.0, reason)
+        full = NewtonResult(np.ones(3), True, [1e-3, 1e-12], 1.0, "converged")
+        attempt, calls = _attempts(modified, full)
+        result, history = newton_pass(attempt, u0, modified_first=True)
+        np.testing.assert_array_equal(calls[1][0], u0)
+        assert history == [1e-3, 1e-12]
+
+
+def test_first_pass_and_converged_modified_newton_make_one_attempt():
+    u0 = np.zeros(3)
+    done = NewtonResult(np.ones(3), True, [1e-3, 1e-12], 1.0, "converged")
+    for modified_first in (True, False):
+        attempt, calls = _attempts(done, done)
+        result, history = newton_pass(attempt, u0, modified_first=modified_first)
+        assert [f for _, f in calls] == [modified_first]
+        assert history == [1e-3, 1e-12]

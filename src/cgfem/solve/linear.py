@@ -31,7 +31,9 @@ solve, ahead from its second solve, insensitive to conditioning; at 173k it need
 factorization to break even, at 286k 9) and to pyamg above; without pypardiso, to superlu
 up to :data:`SUPERLU_MAX_DOFS` (under 1 s), then pyamg. Non-symmetric systems go to pardiso,
 else superlu (pyamg only on request); so do saddle-point systems (``indefinite``: the fit
-constraints of ``nurbs_fit``), which pyamg cannot solve at all. Peak memory at 286k: pardiso 4.1 GB, pyamg 0.9 GB.
+constraints of ``nurbs_fit``) up to :data:`SADDLE_DIRECT_DOFS`, which pyamg cannot solve
+at all; larger ones, their constraints given, are solved on the bodies' dofs
+(:mod:`cgfem.solve.saddle`). Peak memory at 286k: pardiso 4.1 GB, pyamg 0.9 GB.
 """
 
 from __future__ import annotations
@@ -53,6 +55,11 @@ PARDISO_MAX_DOFS = 100_000  #: largest symmetric system ``auto`` sends to pardis
 #: 69k unknowns peaked at 3.8 GB, at 470k it passed 23 GB and was killed; chain2_steel at
 #: level 3, 171k body dofs, was killed at 14 GB where nurbs_fe peaks at 7 GB)
 SADDLE_MAX_DOFS = 150_000
+#: above this many unknowns a saddle point with its fit constraints known is solved on the
+#: bodies' dofs (:mod:`cgfem.solve.saddle`) instead of factorized whole: chain3 at level 1
+#: (20.7k unknowns), 2.9 s whole (23M factor entries) against 2.4 s reduced (3.8M, 11 GMRES
+#: iterations)
+SADDLE_DIRECT_DOFS = 20_000
 SUPERLU_MAX_DOFS = 10_000  #: largest symmetric system ``auto`` sends to superlu (no pardiso)
 DIRECT_CHECK = 1e-8  #: relative residual a direct solve must reach
 MAX_ITERATIONS = 1000  #: bound on the Krylov iterations of one pyamg solve
@@ -158,6 +165,11 @@ class _DirectSolver(LinearSolver):
 
     _apply: Callable[[np.ndarray], np.ndarray]
     _matvec: Callable[[np.ndarray], np.ndarray]
+
+    def solve_unchecked(self, b: np.ndarray) -> np.ndarray:
+        """The factors applied to ``b``, with neither residual check nor refinement (a
+        preconditioner's use)."""
+        return self._apply(np.asarray(b, dtype=np.float64))
 
     def _solve(self, b: np.ndarray, norm_b: float, rtol: float | None) -> tuple[np.ndarray, int, float]:
         x = self._apply(b)
@@ -307,22 +319,22 @@ def factorize(A: sp.spmatrix, *, backend: str = "auto", symmetric: bool = True,
     ``A``. ``near_null`` (e.g. :func:`rigid_body_modes`) and ``rtol`` (relative residual)
     serve pyamg only; ``indefinite``: a saddle-point matrix (:func:`choose_backend`).
     ``saddle``: ``(n_u, constraints)`` of nurbs_fit's saddle point
-    (:mod:`cgfem.solve.saddle`): with ``auto``, a symmetric one above
-    :data:`SADDLE_MAX_DOFS` is solved on the bodies' dofs by AMG-preconditioned CG. Raises
+    (:mod:`cgfem.solve.saddle`): with ``auto``, one above :data:`SADDLE_DIRECT_DOFS` is
+    solved on the bodies' dofs by a Krylov method preconditioned by the reduced matrix,
+    which gets the backend the bodies' dofs alone would get (:func:`choose_backend`). Raises
     :class:`LinearSolverError` on a singular or non-finite matrix, ``ValueError`` on a bad
     backend name or shape."""
     if not sp.issparse(A) or A.ndim != 2 or A.shape[0] != A.shape[1]:
         raise ValueError(f"A must be a square sparse matrix, got {type(A).__name__} "
                          f"of shape {getattr(A, 'shape', None)}")
     name = choose_backend(A.shape[0], symmetric, backend, indefinite)
-    if indefinite and symmetric and A.shape[0] > SADDLE_MAX_DOFS and saddle is not None and backend == "auto":
-        # non-symmetric ones stay whole: GMRES preconditioned by the factorized reduced matrix
-        # (ReducedSaddleSolver, preconditioner="pardiso") matched the whole factorization on
-        # chain2_steel at level 2 (same 74 Newton iterations, 564 s / 2.2 GB against 632 s /
-        # 2.9 GB) but at level 3 its second Newton solve had not finished after 10 min
+    if indefinite and saddle is not None and backend == "auto" and A.shape[0] > SADDLE_DIRECT_DOFS:
+        # the whole factorization's fill is the fit constraints' (chain3 at level 2: 195M
+        # factor entries with or without contact, 36M reduced), which no ordering removed
         from cgfem.solve.saddle import reduced_saddle
-        return reduced_saddle(sp.csr_matrix(A, dtype=np.float64), saddle[0], saddle[1], symmetric, near_null,
-                              max(rtol, 1e-10))
+        n_u = int(saddle[0])
+        return reduced_saddle(sp.csr_matrix(A, dtype=np.float64), n_u, saddle[1], symmetric, near_null,
+                              max(rtol, 1e-10), preconditioner=choose_backend(n_u, symmetric))
     if indefinite and symmetric and A.shape[0] > SADDLE_MAX_DOFS:
         raise LinearSolverError(f"{name}: a symmetric saddle-point system of {A.shape[0]} unknowns "
                                 f"(above {SADDLE_MAX_DOFS}) would not fit in memory factorized, and "

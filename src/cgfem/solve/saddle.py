@@ -16,12 +16,16 @@ eliminated exactly for a given ``u``::
     S u = K u + C^T Kc C u = b_u + G^T M^-1 b_Z - C^T Kc M^-1 b_mu / s,    C = M^-1 G,
 
 and the reduced operator ``S`` (dense over a contact surface if formed: it never is) is
-applied matrix-free in a Krylov solver (CG when the system is symmetric, else GMRES)
-preconditioned by the sparse ``P = K + C~^T Kc C~``, with ``C~`` the fit with a lumped ``M``
-(row sums; non-negative B-spline bases make them positive), which is spectrally close to
-``C``: one V-cycle of smoothed-aggregation AMG of ``P`` (``preconditioner="amg"``), or ``P``
-factorized by a direct backend (``"pardiso"``, ``"superlu"``), which needs the memory of the
-bodies' own factorization instead of the whole saddle point's.
+applied matrix-free in a Krylov solver preconditioned by the sparse ``P = K + C~^T Kc C~``.
+``C~`` holds the exact rows of ``C`` for the controls the contact tangent touches (only those
+enter ``Kc``), each without its entries below :data:`DROP` of its largest: ``M^-1`` of a
+B-spline mass matrix decays fast away from the diagonal, so a row keeps a few knot spans
+around its control and ``P`` stays as sparse as nurbs_fe's matrix while ``P^-1 S`` is close
+to the identity (chain3 at level 1: 11 GMRES iterations). ``P`` is factorized by a direct
+backend (``preconditioner="pardiso"``, ``"superlu"``), which needs the memory of the
+bodies' own factorization instead of the whole saddle point's, or coarsened by
+smoothed-aggregation AMG, one V-cycle per iteration (``"pyamg"``, with CG when the system is
+symmetric).
 """
 
 from __future__ import annotations
@@ -34,6 +38,13 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from cgfem.solve.linear import LinearSolver, LinearSolverError, factorize
+
+#: entries of a row of ``C = M^-1 G`` below this fraction of its largest are left out of the
+#: preconditioner (chain3 at level 1: 1e-2 keeps 30 entries a row where ``G`` has 57, and
+#: GMRES needs 9 iterations; 3e-2 keeps 17 and needs 11; 1e-3, 100 and 6)
+DROP = 3e-2
+#: rows of ``C`` computed at once (``M^-1`` applied to that many unit columns)
+ROW_CHUNK = 256
 
 
 @dataclass(frozen=True)
@@ -56,26 +67,28 @@ class ReducedSaddleSolver(LinearSolver):
     """The saddle-point system solved on ``u`` (module docstring); ``n_u`` the bodies' dofs
     (the first unknowns), ``constraints`` one :class:`FitConstraint` per fitted patch."""
 
-    backend = "saddle-amg"
+    backend = "saddle-pyamg"
 
     def __init__(self, A: sp.csr_matrix, n_u: int, constraints: list[FitConstraint], symmetric: bool,
                  near_null: np.ndarray | None, rtol: float = 1e-10, max_iterations: int = 1000,
-                 preconditioner: str = "amg") -> None:
+                 preconditioner: str = "pyamg", drop: float = DROP) -> None:
         import pyamg
 
         super().__init__(A.shape[0])
-        if preconditioner != "amg":
+        if preconditioner != "pyamg":
             self.backend = f"saddle-{preconditioner}"
         A = sp.csr_matrix(A)
         self.n_u, self.constraints, self.symmetric = n_u, constraints, symmetric
-        self.rtol, self.max_iterations = rtol, max_iterations
+        self.rtol, self.max_iterations, self.drop = rtol, max_iterations, drop
         self.K = A[:n_u][:, :n_u].tocsr()
         z = np.concatenate([c.z for c in constraints])
         self._z = z
         self.Kc = A[z][:, z].tocsr()                     # contact tangent on all fitted Z
         self._offsets = np.concatenate([[0], np.cumsum([c.z.size for c in constraints])])
-        # the preconditioner's matrix: K + C~^T Kc C~ with the lumped fit C~ = D^-1 G
-        Ct = sp.vstack([self._lumped(c) for c in constraints]).tocsr()          # (|z|, n_u)
+        # the preconditioner's matrix: K + C~^T Kc C~ with C~ the truncated rows of C
+        touched = np.flatnonzero(np.diff(self.Kc.indptr) > 0) if self.Kc.nnz else np.zeros(0, np.int64)
+        Ct = sp.vstack([self._fit_rows(c, touched[(touched >= a) & (touched < b)] - a)
+                        for c, a, b in zip(constraints, self._offsets[:-1], self._offsets[1:])]).tocsr()
         P = (self.K + Ct.T @ self.Kc @ Ct).tocsr()
         if symmetric:
             P = (0.5 * (P + P.T)).tocsr()
@@ -84,10 +97,10 @@ class ReducedSaddleSolver(LinearSolver):
             raise LinearSolverError(f"{self.backend}: zero diagonal entries in the reduced matrix")
         # what is factorized (or coarsened): the reduced matrix, n_u x n_u
         self.info.update(factorized_n=int(n_u), factorized_nnz=int(P.nnz))
-        if preconditioner != "amg":
+        if preconditioner != "pyamg":
             factor = factorize(P, backend=preconditioner, symmetric=symmetric)
             self.info["factor_nnz"] = int(factor.info.get("factor_nnz", 0))
-            self._precondition = factor.solve
+            self._precondition = factor.solve_unchecked
             return
         s = 1.0 / np.sqrt(d)
         Ps = (sp.diags(s) @ P @ sp.diags(s)).tocsr()
@@ -102,12 +115,27 @@ class ReducedSaddleSolver(LinearSolver):
                                                **kwargs)
         self._precondition = lambda r: s * ml.solve(s * r, tol=1e-8, maxiter=1, cycle="V")
 
-    def _lumped(self, c: FitConstraint) -> sp.csr_matrix:
-        """``D^-1 G`` per component on the global body columns: (3 m, n_u)."""
-        D = np.asarray(c.M.sum(axis=1)).ravel()
-        Gl = sp.diags(1.0 / D) @ c.G
-        G3 = sp.kron(Gl, sp.identity(3), format="coo")
-        return sp.csr_matrix((G3.data, (G3.row, c.cols[G3.col])), shape=(c.z.size, self.n_u))
+    def _fit_rows(self, c: FitConstraint, rows: np.ndarray) -> sp.csr_matrix:
+        """The rows of ``C = M^-1 G`` of the patch's controls among its ``Z`` rows ``rows``
+        (local, node-major), without entries below :data:`DROP` of a row's largest, per
+        component on the global body columns: (3 m, n_u), zero elsewhere. ``M`` is symmetric:
+        row ``i`` of ``M^-1`` is ``M^-1 e_i``."""
+        m = c.z.size // 3
+        controls = np.unique(np.asarray(rows, np.int64) // 3)
+        parts = []
+        for start in range(0, controls.size, ROW_CHUNK):
+            chunk = controls[start:start + ROW_CHUNK]
+            E = np.zeros((m, chunk.size))
+            E[chunk, np.arange(chunk.size)] = 1.0
+            rows_C = np.asarray(c.G.T @ c.solve_M(E)).T                 # (chunk, n_nodes)
+            largest = np.abs(rows_C).max(axis=1, keepdims=True)
+            rows_C[np.abs(rows_C) < self.drop * largest] = 0.0
+            parts.append(sp.csr_matrix(rows_C))
+        n_nodes = c.G.shape[1]
+        kept = sp.vstack(parts).tocoo() if parts else sp.coo_matrix((0, n_nodes))
+        rows_m = sp.coo_matrix((kept.data, (controls[kept.row], kept.col)), shape=(m, n_nodes))
+        C3 = sp.kron(rows_m, sp.identity(3), format="coo")
+        return sp.csr_matrix((C3.data, (C3.row, c.cols[C3.col])), shape=(c.z.size, self.n_u))
 
     # -- the fit operators on all blocks ---------------------------------------------------
     def _C(self, u: np.ndarray) -> np.ndarray:
@@ -143,13 +171,16 @@ class ReducedSaddleSolver(LinearSolver):
         def callback(*_):
             count[0] += 1
         norm_rhs = float(np.linalg.norm(rhs))
+        # the residual of the bodies' rows is the whole system's (Z and mu are exact given
+        # u), measured against b: a stiff contact tangent makes rhs much larger than b
+        reduced = target * min(1.0, norm_b / norm_rhs) if norm_rhs > 0.0 else target
         if norm_rhs == 0.0:
             u = np.zeros(n_u)
-        elif self.symmetric:
-            u, info = spla.cg(S, rhs, rtol=target, atol=0.0, maxiter=self.max_iterations, M=Pinv,
+        elif self.symmetric and self.backend == "saddle-pyamg":
+            u, info = spla.cg(S, rhs, rtol=reduced, atol=0.0, maxiter=self.max_iterations, M=Pinv,
                               callback=callback)
         else:
-            u, info = spla.gmres(S, rhs, rtol=target, atol=0.0, restart=50, maxiter=self.max_iterations,
+            u, info = spla.gmres(S, rhs, rtol=reduced, atol=0.0, restart=50, maxiter=self.max_iterations,
                                  M=Pinv, callback=callback, callback_type="pr_norm")
         Z = w + self._C(u)
         mu_x = self._Minv(b_Z - self.Kc @ Z) / s
@@ -168,7 +199,7 @@ class ReducedSaddleSolver(LinearSolver):
 
 def reduced_saddle(A: sp.csr_matrix, n_u: int, constraints: list[FitConstraint], symmetric: bool,
                    near_null: np.ndarray | None = None, rtol: float = 1e-10,
-                   preconditioner: str = "amg") -> ReducedSaddleSolver:
+                   preconditioner: str = "pyamg") -> ReducedSaddleSolver:
     """Set up :class:`ReducedSaddleSolver` for ``A`` (timed like the other backends)."""
     t0 = time.perf_counter()
     solver = ReducedSaddleSolver(A, n_u, constraints, symmetric, near_null, rtol,
