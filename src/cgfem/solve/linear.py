@@ -51,9 +51,10 @@ import scipy.sparse.linalg as spla
 
 BACKENDS = ("superlu", "pyamg", "pardiso")
 PARDISO_MAX_DOFS = 100_000  #: largest symmetric system ``auto`` sends to pardiso
-#: largest saddle point factorized whole (pardiso's non-symmetric type: planar nurbs_fit at
-#: 69k unknowns peaked at 3.8 GB, at 470k it passed 23 GB and was killed; chain2_steel at
-#: level 3, 171k body dofs, was killed at 14 GB where nurbs_fe peaks at 7 GB)
+#: largest symmetric saddle point factorized whole when it cannot be reduced (its fit
+#: constraints not given, or a backend requested): planar nurbs_fit at 69k unknowns peaked
+#: at 3.8 GB, at 470k it passed 23 GB and was killed; chain2_steel at level 3, 171k body
+#: dofs, was killed at 14 GB where nurbs_fe peaks at 7 GB
 SADDLE_MAX_DOFS = 150_000
 #: above this many unknowns a saddle point with its fit constraints known is solved on the
 #: bodies' dofs (:mod:`cgfem.solve.saddle`) instead of factorized whole: chain3 at level 1
