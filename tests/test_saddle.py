@@ -125,3 +125,46 @@ def test_truncated_fit_rows_make_a_close_preconditioner(symmetric):
     rows = saddle.ReducedSaddleSolver(A, n_u, [c], symmetric, None, preconditioner="superlu")._fit_rows(
         c, np.arange(12, 3 * 24))
     assert rows[:12].nnz == 0 and rows[12:].nnz > 0
+
+
+def _with_contact(A: sp.csr_matrix, c: FitConstraint, factor: float) -> sp.csr_matrix:
+    """``A`` with its contact block ``Kc`` multiplied by ``factor``."""
+    A = sp.lil_matrix(A)
+    z = c.z
+    A[np.ix_(z, z)] = A[np.ix_(z, z)].toarray() * factor
+    return sp.csr_matrix(A)
+
+
+@pytest.mark.parametrize("symmetric", [True, False])
+def test_next_newton_matrix_borrows_the_preconditioner_while_it_serves(symmetric, monkeypatch):
+    """A close matrix (contact tangent 2 % stiffer) solves with the last one's preconditioner
+    in as many iterations (18 against 20); a far one (another contact tangent, touching
+    other controls too) spends what a borrowed one is allowed (40), builds its own and still
+    solves to the direct solution (19 more); a solver whose solves needed more than the
+    allowance lends to nobody; nor does one whose build costs less than LEND_COST of spending
+    the allowance."""
+    from cgfem.solve import saddle
+    A, b, n_u, c = _fit_like_system()
+    first = reduced_saddle(A, n_u, [c], symmetric, preconditioner="superlu")
+    first.solve(b)
+    assert first._build_s > 0.0 and first._iteration_s > 0.0
+    monkeypatch.setattr(saddle, "LEND_COST", 0.0)
+    assert not first.lends_to(reduced_saddle(A, n_u, [c], symmetric, preconditioner="superlu"))
+    monkeypatch.setattr(saddle, "LEND_COST", 1e6)
+    assert first._allowed == max(saddle.LENT_FACTOR * first.info["iterations"][-1], saddle.LENT_MIN_ITERATIONS)
+    A_close = _with_contact(A, c, 1.02)
+    close = reduced_saddle(A_close, n_u, [c], symmetric, preconditioner="superlu", previous=first)
+    assert close.lent == 1 and close._precondition is first._precondition
+    x = close.solve(b)
+    assert np.linalg.norm(A_close @ x - b) <= 1e-8 * np.linalg.norm(b)
+    assert close.lent == 1 and close.info["iterations"][-1] <= first.info["iterations"][-1] + 2
+    A_far = _fit_like_system(drop_rows=0, seed=2)[0]
+    far = reduced_saddle(A_far, n_u, [c], symmetric, preconditioner="superlu", previous=close)
+    assert far.lent == 2
+    x = far.solve(b)
+    assert far.lent == 0 and far._precondition is not first._precondition   # built its own
+    assert np.linalg.norm(A_far @ x - b) <= 1e-8 * np.linalg.norm(b)
+    assert far.info["iterations"][-1] > first._allowed                      # the failed try counted
+    assert far.lends_to(reduced_saddle(A, n_u, [c], symmetric, preconditioner="superlu"))
+    far._worst = far._allowed + 1
+    assert not far.lends_to(reduced_saddle(A, n_u, [c], symmetric, preconditioner="superlu"))
