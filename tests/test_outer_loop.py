@@ -46,12 +46,14 @@ def test_relaxation_starts_plain_and_bounds_its_factor():
     assert abs(x[0] - 20.0).max() < abs(0.95 + 1.0 - 20.0)  # nearer than plain substitution
 
 
-def _attempts(modified: NewtonResult, full: NewtonResult):
-    calls = []
+def _attempts(modified: NewtonResult, *full: NewtonResult):
+    """An ``attempt`` returning ``modified`` for modified Newton and the ``full`` results in
+    turn for full Newton; and the list of its calls (start, fixed_tangent)."""
+    calls, results = [], list(full)
 
     def attempt(start, fixed_tangent):
         calls.append((start.copy(), fixed_tangent))
-        return modified if fixed_tangent else full
+        return modified if fixed_tangent else results.pop(0)
     return attempt, calls
 
 
@@ -86,3 +88,17 @@ def test_first_pass_and_converged_modified_newton_make_one_attempt():
         result, history = newton_pass(attempt, u0, modified_first=modified_first)
         assert [f for _, f in calls] == [modified_first]
         assert history == [1e-3, 1e-12]
+
+
+def test_full_newton_from_the_pass_start_when_it_fails_from_modified_newtons_point():
+    u0 = np.zeros(3)
+    modified = NewtonResult(np.full(3, 0.9), False, [1e-3, 1e-5, 1e-6], 1.0, "max_iterations")
+    stuck = NewtonResult(np.full(3, 0.95), False, [1e-6, 9e-7], 1.0, "line_search")
+    full = NewtonResult(np.ones(3), True, [1e-3, 1e-12], 1.0, "converged")
+    attempt, calls = _attempts(modified, stuck, full)
+    result, history = newton_pass(attempt, u0, modified_first=True)
+    assert result is full
+    assert [f for _, f in calls] == [True, False, False]
+    np.testing.assert_array_equal(calls[1][0], modified.u)
+    np.testing.assert_array_equal(calls[2][0], u0)
+    assert history == [1e-3, 1e-12]

@@ -396,16 +396,23 @@ def newton_pass(attempt: Callable[[np.ndarray, bool], NewtonResult], u: np.ndarr
     on the last factorization first, then, if it does not converge within its few
     iterations, full Newton, from where modified Newton got to when it went down (chain2_steel
     at level 2: 1.2e-9 after 6 modified iterations, then 1 full iteration instead of 3 from
-    the pass's start), else from ``u``. Returns the last result and the residual history of
-    the iterates that lead to it (the modified ones first)."""
-    start, earlier = u, []
-    for fixed_tangent in ([True, False] if modified_first else [False]):
-        result = attempt(start, fixed_tangent)
+    the pass's start), and from ``u`` if that fails too (modified Newton may stop on a kink
+    of the contact surface, line searches cutting its steps: chain2_steel at level 2 with
+    nurbs_fe, whose full Newton from there failed at load 0.8 where it converges from ``u``).
+    Returns the last result and the residual history of the iterates that lead to it (the
+    modified ones first)."""
+    if not modified_first:
+        result = attempt(u, False)
+        return result, list(result.residuals)
+    modified = attempt(u, True)
+    if modified.converged:
+        return modified, list(modified.residuals)
+    if modified.reason == "max_iterations" and modified.residuals[-1] < modified.residuals[0]:
+        result = attempt(modified.u, False)
         if result.converged:
-            break
-        if fixed_tangent and result.reason == "max_iterations" and result.residuals[-1] < result.residuals[0]:
-            start, earlier = result.u, result.residuals[:-1]
-    return result, earlier + result.residuals
+            return result, modified.residuals[:-1] + result.residuals
+    result = attempt(u, False)
+    return result, list(result.residuals)
 
 
 def shift_factor(norm: float, largest: float) -> float:
