@@ -126,7 +126,6 @@ class ReducedSaddleSolver(LinearSolver):
 
     def _build(self) -> None:
         """The preconditioner of this solver's own matrix (module docstring), timed."""
-
         n_u, symmetric = self.n_u, self.symmetric
         # the allowance and the time of an iteration are set by the first solve; _worst: the
         # most iterations a solve with this preconditioner needed
