@@ -168,3 +168,22 @@ def test_next_newton_matrix_borrows_the_preconditioner_while_it_serves(symmetric
     assert far.lends_to(reduced_saddle(A, n_u, [c], symmetric, preconditioner="superlu"))
     far._worst = far._allowed + 1
     assert not far.lends_to(reduced_saddle(A, n_u, [c], symmetric, preconditioner="superlu"))
+
+
+def test_a_lent_preconditioner_is_kept_only_if_it_reaches_the_requested_residual(monkeypatch):
+    """With a loose (inexact Newton) tolerance a lent preconditioner that cannot reach it
+    within its allowance (here eight iterations) is not kept: the solve builds its own and the
+    residual is within the requested tolerance, not merely within the final check's."""
+    from cgfem.solve import saddle
+    monkeypatch.setattr(saddle, "LEND_COST", 1e6)
+    A, b, n_u, c = _fit_like_system()
+    first = reduced_saddle(A, n_u, [c], False, preconditioner="superlu")
+    first.solve(b)
+    first._allowed = first._worst = 8
+    A_far = _fit_like_system(drop_rows=0, seed=2)[0]
+    far = reduced_saddle(A_far, n_u, [c], False, preconditioner="superlu", previous=first)
+    assert far.lent == 1
+    x = far.solve(b, rtol=0.3)
+    assert far.lent == 0                                  # it built its own
+    # kept on the final check's 10 * rtol, the lent one left 2.3 |b| (measured)
+    assert np.linalg.norm(A_far @ x - b) <= 0.3 * np.linalg.norm(b)
