@@ -27,13 +27,6 @@ backend (``preconditioner="pardiso"``, ``"superlu"``), which needs the memory of
 bodies' own factorization instead of the whole saddle point's, or coarsened by
 smoothed-aggregation AMG, one V-cycle per iteration (``"pyamg"``, with CG when the system is
 symmetric).
-
-Building ``P`` is most of a solve's cost (its factorization: 88 % of chain2_steel's Newton
-iterations at level 3). Newton's next matrices are close to the last one, and the Krylov
-method makes up for a preconditioner of an older matrix with a few more iterations: the
-solver of a new matrix borrows the last one's preconditioner (``previous``) while the solves
-with it need at most :data:`LENT_FACTOR` times the iterations of its first solve; a solve that
-would need more builds the preconditioner of its own matrix and starts again.
 """
 
 from __future__ import annotations
@@ -53,19 +46,6 @@ from cgfem.solve.linear import LinearSolver, LinearSolverError, factorize
 DROP = 3e-2
 #: rows of ``C`` computed at once (``M^-1`` applied to that many unit columns)
 ROW_CHUNK = 256
-#: a preconditioner is lent to the next Newton matrices (:class:`ReducedSaddleSolver`'s
-#: ``previous``) while the Krylov solves with it need at most this many times the iterations
-#: of its first solve (and at least LENT_MIN_ITERATIONS); a solve that needs more builds the
-#: preconditioner of its own matrix and starts again
-LENT_FACTOR = 2
-LENT_MIN_ITERATIONS = 20
-#: ... and only while spending the allowance in vain costs at most this fraction of building
-#: a preconditioner: at level 2 of chain3 a build (factorization) costs about as much as 20
-#: GMRES iterations and lending made the Newton iterations twice as long (the matrices of
-#: its first iterations are far apart); at level 3 of chain2_steel a build costs about 130
-LEND_COST = 0.5
-#: a lent preconditioner's GMRES cycle that ends within this factor of the goal gets a second
-POLISH = 100.0
 
 
 @dataclass(frozen=True)
@@ -92,55 +72,24 @@ class ReducedSaddleSolver(LinearSolver):
 
     def __init__(self, A: sp.csr_matrix, n_u: int, constraints: list[FitConstraint], symmetric: bool,
                  near_null: np.ndarray | None, rtol: float = 1e-10, max_iterations: int = 1000,
-                 preconditioner: str = "pyamg", drop: float = DROP,
-                 previous: "ReducedSaddleSolver | None" = None) -> None:
+                 preconditioner: str = "pyamg", drop: float = DROP) -> None:
+        import pyamg
+
         super().__init__(A.shape[0])
         if preconditioner != "pyamg":
             self.backend = f"saddle-{preconditioner}"
         A = sp.csr_matrix(A)
         self.n_u, self.constraints, self.symmetric = n_u, constraints, symmetric
         self.rtol, self.max_iterations, self.drop = rtol, max_iterations, drop
-        self._kind, self._near_null = preconditioner, near_null
         self.K = A[:n_u][:, :n_u].tocsr()
         z = np.concatenate([c.z for c in constraints])
         self._z = z
         self.Kc = A[z][:, z].tocsr()                     # contact tangent on all fitted Z
         self._offsets = np.concatenate([[0], np.cumsum([c.z.size for c in constraints])])
-        if previous is not None and previous.lends_to(self):
-            # a Newton matrix close to the last one: its preconditioner serves this one too
-            self._precondition, self._allowed = previous._precondition, previous._allowed
-            self._build_s, self._iteration_s = previous._build_s, previous._iteration_s
-            self.lent, self._worst = previous.lent + 1, 0
-            self.info.update({k: previous.info[k] for k in ("factorized_n", "factorized_nnz", "factor_nnz")
-                              if k in previous.info})
-        else:
-            self._build()
-
-    def lends_to(self, other: "ReducedSaddleSolver") -> bool:
-        """Whether ``other`` (the next Newton matrix, same unknowns) may use this solver's
-        preconditioner: it has solved, never needing more than it allows, and spending the
-        allowance in vain would cost at most :data:`LEND_COST` of a build."""
-        return (self._allowed is not None and self._worst <= self._allowed
-                and self._allowed * self._iteration_s <= LEND_COST * self._build_s
-                and self._kind == other._kind and self.n_u == other.n_u and np.array_equal(self._z, other._z))
-
-    def _build(self) -> None:
-        """The preconditioner of this solver's own matrix (module docstring), timed."""
-        n_u, symmetric = self.n_u, self.symmetric
-        # the allowance and the time of an iteration are set by the first solve; _worst: the
-        # most iterations a solve with this preconditioner needed
-        self.lent, self._allowed, self._worst, self._iteration_s = 0, None, 0, 0.0
-        start = time.perf_counter()
-        self._make(n_u, symmetric)
-        self._build_s = time.perf_counter() - start
-
-    def _make(self, n_u: int, symmetric: bool) -> None:
-        import pyamg
-
         # the preconditioner's matrix: K + C~^T Kc C~ with C~ the truncated rows of C
         touched = np.flatnonzero(np.diff(self.Kc.indptr) > 0) if self.Kc.nnz else np.zeros(0, np.int64)
         Ct = sp.vstack([self._fit_rows(c, touched[(touched >= a) & (touched < b)] - a)
-                        for c, a, b in zip(self.constraints, self._offsets[:-1], self._offsets[1:])]).tocsr()
+                        for c, a, b in zip(constraints, self._offsets[:-1], self._offsets[1:])]).tocsr()
         P = (self.K + Ct.T @ self.Kc @ Ct).tocsr()
         if symmetric:
             P = (0.5 * (P + P.T)).tocsr()
@@ -149,14 +98,14 @@ class ReducedSaddleSolver(LinearSolver):
             raise LinearSolverError(f"{self.backend}: zero diagonal entries in the reduced matrix")
         # what is factorized (or coarsened): the reduced matrix, n_u x n_u
         self.info.update(factorized_n=int(n_u), factorized_nnz=int(P.nnz))
-        if self._kind != "pyamg":
-            factor = factorize(P, backend=self._kind, symmetric=symmetric)
+        if preconditioner != "pyamg":
+            factor = factorize(P, backend=preconditioner, symmetric=symmetric)
             self.info["factor_nnz"] = int(factor.info.get("factor_nnz", 0))
             self._precondition = factor.solve_unchecked
             return
         s = 1.0 / np.sqrt(d)
         Ps = (sp.diags(s) @ P @ sp.diags(s)).tocsr()
-        B = None if self._near_null is None else self._near_null[:n_u] / s[:, None]
+        B = None if near_null is None else near_null[:n_u] / s[:, None]
         # as for the bodies' own matrices (cgfem.solve.linear): nodal 3x3 blocks, and the
         # given near-null space taken as it is (improving it costs relaxation sweeps on all
         # six modes on every level)
@@ -217,69 +166,32 @@ class ReducedSaddleSolver(LinearSolver):
         w = self._Minv(b_mu / s)                                    # M^-1 b_mu / s
         rhs = b_u + self._Ct(b_Z) - self._Ct(self.Kc @ w)
         S = spla.LinearOperator((n_u, n_u), matvec=lambda v: self.K @ v + self._Ct(self.Kc @ self._C(v)))
+        Pinv = spla.LinearOperator((n_u, n_u), matvec=self._precondition)
+        count = [0]
+
+        def callback(*_):
+            count[0] += 1
         norm_rhs = float(np.linalg.norm(rhs))
         # the residual of the bodies' rows is the whole system's (Z and mu are exact given
         # u), measured against b: a stiff contact tangent makes rhs much larger than b
         reduced = target * min(1.0, norm_b / norm_rhs) if norm_rhs > 0.0 else target
-        # what a solve with a lent preconditioner must reach to be kept, as a residual norm:
-        # the goal itself (a loose inexact-Newton goal is already all the accuracy Newton
-        # asked for), or where the final check below stops being strict
-        accept = max(target, 1e-9) * norm_b
-        count = 0
-        while True:
-            start = time.perf_counter()
-            u, iterations, done = self._krylov(S, rhs, norm_rhs, reduced, accept)
-            count += iterations
-            if done or not self.lent:
-                break
-            self._build()           # the lent preconditioner no longer fits: this matrix's own
-        if self._allowed is None:
-            self._allowed = max(LENT_FACTOR * iterations, LENT_MIN_ITERATIONS)
-            self._iteration_s = (time.perf_counter() - start) / max(iterations, 1)
-        self._worst = max(self._worst, iterations)
+        if norm_rhs == 0.0:
+            u = np.zeros(n_u)
+        elif self.symmetric and self.backend == "saddle-pyamg":
+            u, info = spla.cg(S, rhs, rtol=reduced, atol=0.0, maxiter=self.max_iterations, M=Pinv,
+                              callback=callback)
+        else:
+            u, info = spla.gmres(S, rhs, rtol=reduced, atol=0.0, restart=50, maxiter=self.max_iterations,
+                                 M=Pinv, callback=callback, callback_type="pr_norm")
         Z = w + self._C(u)
         mu_x = self._Minv(b_Z - self.Kc @ Z) / s
         x = np.zeros(self.n)
         x[:n_u], x[z], x[mu] = u, Z, mu_x
         residual = float(np.linalg.norm(b - self._matvec(x))) / norm_b if norm_b > 0.0 else 0.0
         if not np.isfinite(residual) or residual > max(10.0 * target, 1e-8):
-            raise LinearSolverError(f"{self.backend}: reached relative residual {residual:.2e} in {count} "
+            raise LinearSolverError(f"{self.backend}: reached relative residual {residual:.2e} in {count[0]} "
                                     f"Krylov iterations")
-        return x, count, residual
-
-    def _krylov(self, S: spla.LinearOperator, rhs: np.ndarray, norm_rhs: float, reduced: float,
-                accept: float) -> tuple[np.ndarray, int, bool]:
-        """``S u = rhs`` to the relative residual ``reduced``: (u, iterations, whether the
-        residual is within ``accept``). A lent preconditioner gets its allowance of
-        iterations, and the allowance again when that left the residual within
-        :data:`POLISH` times ``accept`` (GMRES: the cycle ends on its estimate of the
-        preconditioned residual, and the true one may lag)."""
-        n_u = self.n_u
-        if norm_rhs == 0.0:
-            return np.zeros(n_u), 0, True
-        Pinv = spla.LinearOperator((n_u, n_u), matvec=self._precondition)
-        limit = self._allowed if self.lent else self.max_iterations
-        count = [0]
-
-        def callback(*_):
-            count[0] += 1
-        if self.symmetric and self.backend == "saddle-pyamg":
-            u, info = spla.cg(S, rhs, rtol=reduced, atol=0.0, maxiter=limit, M=Pinv, callback=callback)
-            return u, count[0], info == 0 or float(np.linalg.norm(rhs - S @ u)) <= accept
-        if self.lent:
-            # a cycle of the allowance. GMRES ends it on its estimate of the residual; when the
-            # true one is not quite there, a second cycle from that point finishes the solve
-            u, info = spla.gmres(S, rhs, rtol=reduced, atol=0.0, restart=limit, maxiter=1, M=Pinv,
-                                 callback=callback, callback_type="pr_norm")
-            left = float(np.linalg.norm(rhs - S @ u))
-            if accept < left <= POLISH * accept:
-                u, info = spla.gmres(S, rhs, x0=u, rtol=reduced, atol=0.0, restart=limit, maxiter=1, M=Pinv,
-                                     callback=callback, callback_type="pr_norm")
-                left = float(np.linalg.norm(rhs - S @ u))
-            return u, count[0], info == 0 or left <= accept
-        u, info = spla.gmres(S, rhs, rtol=reduced, atol=0.0, restart=50, maxiter=self.max_iterations,
-                             M=Pinv, callback=callback, callback_type="pr_norm")
-        return u, count[0], info == 0
+        return x, count[0], residual
 
     def bind(self, A: sp.csr_matrix) -> "ReducedSaddleSolver":
         self._matvec = A.dot
@@ -288,12 +200,10 @@ class ReducedSaddleSolver(LinearSolver):
 
 def reduced_saddle(A: sp.csr_matrix, n_u: int, constraints: list[FitConstraint], symmetric: bool,
                    near_null: np.ndarray | None = None, rtol: float = 1e-10,
-                   preconditioner: str = "pyamg", previous: LinearSolver | None = None) -> ReducedSaddleSolver:
-    """Set up :class:`ReducedSaddleSolver` for ``A`` (timed like the other backends);
-    ``previous``: the solver of the last Newton matrix, whose preconditioner this one may use."""
+                   preconditioner: str = "pyamg") -> ReducedSaddleSolver:
+    """Set up :class:`ReducedSaddleSolver` for ``A`` (timed like the other backends)."""
     t0 = time.perf_counter()
-    lender = previous if isinstance(previous, ReducedSaddleSolver) else None
     solver = ReducedSaddleSolver(A, n_u, constraints, symmetric, near_null, rtol,
-                                 preconditioner=preconditioner, previous=lender).bind(sp.csr_matrix(A))
+                                 preconditioner=preconditioner).bind(sp.csr_matrix(A))
     solver.info.update(backend=solver.backend, symmetric=symmetric, setup_s=time.perf_counter() - t0)
     return solver

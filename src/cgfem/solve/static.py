@@ -317,8 +317,7 @@ class _Solver:
     def __call__(self, K: sp.csr_matrix, b: np.ndarray, rtol: float | None = None) -> np.ndarray:
         if self._key is not K and not (self.frozen and self._factor is not None):
             self._factor = factorize(K, backend=self.backend, symmetric=self.symmetric,
-                                     near_null=self.near_null, indefinite=self.indefinite, saddle=self.saddle,
-                                     previous=self._factor)
+                                     near_null=self.near_null, indefinite=self.indefinite, saddle=self.saddle)
             self._key = K
         return self._factor.solve(b, rtol)
 
