@@ -126,3 +126,29 @@ def test_truncated_fit_rows_make_a_close_preconditioner(symmetric):
     rows = saddle.ReducedSaddleSolver(A, n_u, [c], symmetric, None, preconditioner="superlu")._fit_rows(
         c, np.arange(12, 3 * 24))
     assert rows[:12].nnz == 0 and rows[12:].nnz > 0
+
+
+def test_rows_of_the_fit_are_computed_once_per_control():
+    """The truncated rows of ``C = M^-1 G`` equal the dense ``M^-1 G`` thresholded row by
+    row; asked again (a later Newton matrix), the rows already known cost no solve with
+    ``M``, and a larger set solves only for the new controls."""
+    from cgfem.solve.saddle import DROP
+    A, b, n_u, c0 = _fit_like_system()
+    solved = []
+
+    def solve_M(Y, A=c0.M.toarray()):
+        solved.append(Y.shape[1])
+        return np.linalg.solve(A, Y)
+    c = FitConstraint(c0.z, c0.mu, c0.cols, c0.M, c0.G, solve_M, c0.scale)
+    dense = np.linalg.solve(c.M.toarray(), c.G.toarray())
+    dense[np.abs(dense) < DROP * np.abs(dense).max(axis=1, keepdims=True)] = 0.0
+    first = c.truncated_rows(np.array([3, 7, 8]), DROP).toarray()
+    np.testing.assert_allclose(first[[3, 7, 8]], dense[[3, 7, 8]], rtol=0, atol=1e-14)
+    assert not first[[0, 1, 2, 4, 5, 6]].any() and solved == [3]
+    again = c.truncated_rows(np.array([3, 7, 8]), DROP).toarray()
+    np.testing.assert_array_equal(again, first)
+    assert solved == [3]
+    more = c.truncated_rows(np.array([1, 3, 7, 8, 20]), DROP).toarray()
+    assert solved == [3, 2]
+    np.testing.assert_allclose(more[[1, 3, 7, 8, 20]], dense[[1, 3, 7, 8, 20]], rtol=0, atol=1e-14)
+    assert c.truncated_rows(np.zeros(0, np.int64), DROP).nnz == 0

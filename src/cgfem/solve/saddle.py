@@ -33,7 +33,7 @@ the system is symmetric).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -54,7 +54,9 @@ class FitConstraint:
     """One fitted patch's block of the saddle point: ``z``, ``mu`` (3 m,) global indices of
     its control displacements and multipliers, ``cols`` (3 n_nodes,) those of its body's
     dofs (node-major), ``M`` (m, m), ``G`` (m, n_nodes), ``solve_M`` (``M^-1``, per
-    column of an (m, k) array), ``scale`` ``s``."""
+    column of an (m, k) array), ``scale`` ``s``. ``M`` and ``G`` are fixed for a run, so
+    the rows of ``C = M^-1 G`` the preconditioners ask for are computed once
+    (:meth:`truncated_rows`)."""
 
     z: np.ndarray
     mu: np.ndarray
@@ -63,6 +65,34 @@ class FitConstraint:
     G: sp.csr_matrix
     solve_M: object
     scale: float
+    _rows: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def truncated_rows(self, controls: np.ndarray, drop: float) -> sp.csr_matrix:
+        """The rows of ``C = M^-1 G`` of ``controls`` (sorted, unique), without entries
+        below ``drop`` of a row's largest: (m, n_nodes), zero in the other rows. ``M`` is
+        symmetric, so row ``i`` of ``M^-1`` is ``M^-1 e_i``; rows not asked for before are
+        computed :data:`ROW_CHUNK` at a time and kept."""
+        m, n_nodes = self.G.shape
+        kept = self._rows.setdefault(drop, {})
+        missing = np.array([i for i in controls.tolist() if i not in kept], np.int64)
+        for start in range(0, missing.size, ROW_CHUNK):
+            chunk = missing[start:start + ROW_CHUNK]
+            E = np.zeros((m, chunk.size))
+            E[chunk, np.arange(chunk.size)] = 1.0
+            rows = np.asarray(self.G.T @ self.solve_M(E)).T                   # (chunk, n_nodes)
+            rows[np.abs(rows) < drop * np.abs(rows).max(axis=1, keepdims=True)] = 0.0
+            rows = sp.csr_matrix(rows)
+            for k, i in enumerate(chunk.tolist()):
+                a, b = rows.indptr[k], rows.indptr[k + 1]
+                kept[i] = (rows.indices[a:b].copy(), rows.data[a:b].copy())
+        counts = np.array([kept[i][0].size for i in controls.tolist()], np.int64)
+        indptr = np.zeros(m + 1, np.int64)
+        np.add.at(indptr, np.asarray(controls, np.int64) + 1, counts)
+        if controls.size == 0:
+            return sp.csr_matrix((m, n_nodes))
+        indices = np.concatenate([kept[i][0] for i in controls.tolist()])
+        data = np.concatenate([kept[i][1] for i in controls.tolist()])
+        return sp.csr_matrix((data, indices, np.cumsum(indptr)), shape=(m, n_nodes))
 
 
 class ReducedSaddleSolver(LinearSolver):
@@ -87,6 +117,8 @@ class ReducedSaddleSolver(LinearSolver):
         self._z = z
         self.Kc = A[z][:, z].tocsr()                     # contact tangent on all fitted Z
         self._offsets = np.concatenate([[0], np.cumsum([c.z.size for c in constraints])])
+        self._mu = np.concatenate([c.mu for c in constraints])
+        self._s = np.concatenate([np.full(c.z.size, c.scale) for c in constraints])
         # the preconditioner's matrix: K + C~^T Kc C~ with C~ the truncated rows of C
         touched = np.flatnonzero(np.diff(self.Kc.indptr) > 0) if self.Kc.nnz else np.zeros(0, np.int64)
         Ct = sp.vstack([self._fit_rows(c, touched[(touched >= a) & (touched < b)] - a)
@@ -118,25 +150,11 @@ class ReducedSaddleSolver(LinearSolver):
         self._precondition = lambda r: s * ml.solve(s * r, tol=1e-8, maxiter=1, cycle="V")
 
     def _fit_rows(self, c: FitConstraint, rows: np.ndarray) -> sp.csr_matrix:
-        """The rows of ``C = M^-1 G`` of the patch's controls among its ``Z`` rows ``rows``
-        (local, node-major), without entries below :data:`DROP` of a row's largest, per
-        component on the global body columns: (3 m, n_u), zero elsewhere. ``M`` is symmetric:
-        row ``i`` of ``M^-1`` is ``M^-1 e_i``."""
-        m = c.z.size // 3
+        """:meth:`FitConstraint.truncated_rows` of the patch's controls among its ``Z`` rows
+        ``rows`` (local, node-major), per component on the global body columns: (3 m, n_u),
+        zero elsewhere."""
         controls = np.unique(np.asarray(rows, np.int64) // 3)
-        parts = []
-        for start in range(0, controls.size, ROW_CHUNK):
-            chunk = controls[start:start + ROW_CHUNK]
-            E = np.zeros((m, chunk.size))
-            E[chunk, np.arange(chunk.size)] = 1.0
-            rows_C = np.asarray(c.G.T @ c.solve_M(E)).T                 # (chunk, n_nodes)
-            largest = np.abs(rows_C).max(axis=1, keepdims=True)
-            rows_C[np.abs(rows_C) < self.drop * largest] = 0.0
-            parts.append(sp.csr_matrix(rows_C))
-        n_nodes = c.G.shape[1]
-        kept = sp.vstack(parts).tocoo() if parts else sp.coo_matrix((0, n_nodes))
-        rows_m = sp.coo_matrix((kept.data, (controls[kept.row], kept.col)), shape=(m, n_nodes))
-        C3 = sp.kron(rows_m, sp.identity(3), format="coo")
+        C3 = sp.kron(c.truncated_rows(controls, self.drop), sp.identity(3), format="coo")
         return sp.csr_matrix((C3.data, (C3.row, c.cols[C3.col])), shape=(c.z.size, self.n_u))
 
     # -- the fit operators on all blocks ---------------------------------------------------
@@ -155,14 +173,10 @@ class ReducedSaddleSolver(LinearSolver):
         return np.concatenate([c.solve_M(y[a:b].reshape(-1, 3)).ravel()
                                for c, a, b in zip(self.constraints, self._offsets[:-1], self._offsets[1:])])
 
-    def _scales(self) -> np.ndarray:
-        return np.concatenate([np.full(c.z.size, c.scale) for c in self.constraints])
-
     def _solve(self, b: np.ndarray, norm_b: float, rtol: float | None) -> tuple[np.ndarray, int, float]:
         n_u, z = self.n_u, self._z
         target = self.rtol if rtol is None else max(self.rtol, rtol)
-        mu = np.concatenate([c.mu for c in self.constraints])
-        s = self._scales()
+        mu, s = self._mu, self._s
         b_u, b_Z, b_mu = b[:n_u], b[z], b[mu]
         w = self._Minv(b_mu / s)                                    # M^-1 b_mu / s
         rhs = b_u + self._Ct(b_Z) - self._Ct(self.Kc @ w)
