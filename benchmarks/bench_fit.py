@@ -8,15 +8,18 @@ time, time per Newton iteration and the peak resident memory. The last lines giv
 nurbs_fit / nurbs_fe measured in the same run (targets: time <= 3x, memory <= 2x, nonzeros
 per unknown within 20 %).
 
-    python3 benchmarks/bench_fit.py [--parallel] [levels ...]        # default: 1 2
+    python3 benchmarks/bench_fit.py [--parallel] [--first-step] [levels ...]   # default: 1 2
 
 ``--parallel``: the two definitions of a level run at once, one thread each (2 cores: level 3
-takes about an hour per definition); both then share the machine alike, so their ratios
+takes over an hour per definition); both then share the machine alike, so their ratios
 still compare like with like, while their absolute times are those of a loaded machine.
+``--first-step``: only the case's first load step (the caps pulled by a fifth of the 5 mm, as
+one step): the contact forms there, and it is about half of a whole run's Newton iterations.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import subprocess
@@ -29,7 +32,18 @@ CASE = REPO / "config" / "cases" / "chain2_steel.yaml"
 SURFACES = ("nurbs_fe", "nurbs_fit")
 
 
-def one_run(level: int, surface: str, folder: Path) -> dict:
+def first_step_case():
+    """chain2_steel's first load step alone: one step, the pull divided by the step count."""
+    from cgfem.case import parse_case, parse_yaml
+
+    data = parse_yaml(CASE.read_text())
+    pulled = next(b for b in data["boundary"] if b["body"] == "link_b")
+    pulled["components"]["y"] /= data["steps"]
+    data["steps"] = 1
+    return parse_case(data, CASE.parent)
+
+
+def one_run(level: int, surface: str, folder: Path, first_step: bool = False) -> dict:
     """Run one analysis in this process (a child) and return its figures."""
     import resource
 
@@ -49,7 +63,8 @@ def one_run(level: int, surface: str, folder: Path) -> dict:
         return solver
 
     static.factorize = counting
-    status = run_case(load_case(CASE), level, surface, folder / "out")
+    case = first_step_case() if first_step else load_case(CASE)
+    status = run_case(case, level, surface, folder / "out")
     summary = json.loads(status.summary.read_text())
     iterations = sum(len(r) - 1 for s in summary["steps"] for r in s["pass_residuals"])
     solve = summary["timings"]["solve_s"]
@@ -62,14 +77,15 @@ def one_run(level: int, surface: str, folder: Path) -> dict:
             "peak_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
 
 
-def _child(level: int, surface: str, tmp: str, env: dict | None) -> subprocess.Popen:
+def _child(level: int, surface: str, tmp: str, env: dict | None, first_step: bool) -> subprocess.Popen:
     code = (f"import json, sys; sys.path.insert(0, {str(REPO / 'benchmarks')!r}); import bench_fit; "
-            f"from pathlib import Path; print(json.dumps(bench_fit.one_run({level}, {surface!r}, Path({tmp!r}))))")
+            f"from pathlib import Path; "
+            f"print(json.dumps(bench_fit.one_run({level}, {surface!r}, Path({tmp!r}), {first_step!r})))")
     return subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=env)
 
 
-def main(levels: list[int], parallel: bool = False) -> None:
+def main(levels: list[int], parallel: bool = False, first_step: bool = False) -> None:
     rows = []
     env = None
     if parallel:
@@ -80,7 +96,7 @@ def main(levels: list[int], parallel: bool = False) -> None:
         groups = [SURFACES] if parallel else [(s,) for s in SURFACES]
         for group in groups:
             tmps = [tempfile.TemporaryDirectory() for _ in group]
-            children = [_child(level, surface, t.name, env) for surface, t in zip(group, tmps)]
+            children = [_child(level, surface, t.name, env, first_step) for surface, t in zip(group, tmps)]
             for surface, child, tmp in zip(group, children, tmps):
                 stdout, stderr = child.communicate()
                 tmp.cleanup()
@@ -104,5 +120,9 @@ def main(levels: list[int], parallel: bool = False) -> None:
 
 
 if __name__ == "__main__":
-    args = sys.argv[1:]
-    main([int(a) for a in args if a != "--parallel"] or [1, 2], parallel="--parallel" in args)
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("levels", nargs="*", type=int, default=[1, 2])
+    parser.add_argument("--parallel", action="store_true", help="both definitions of a level at once, one thread each")
+    parser.add_argument("--first-step", action="store_true", help="only the first load step")
+    args = parser.parse_args()
+    main(args.levels, parallel=args.parallel, first_step=args.first_step)
