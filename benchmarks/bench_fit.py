@@ -14,7 +14,9 @@ per unknown within 20 %).
 takes over an hour per definition); both then share the machine alike, so their ratios
 still compare like with like, while their absolute times are those of a loaded machine.
 ``--first-step``: only the case's first load step (the caps pulled by a fifth of the 5 mm, as
-one step): the contact forms there, and it is about half of a whole run's Newton iterations.
+one step): the contact forms there, and it takes about half of a whole run's Newton
+iterations (nurbs_fe at level 3: 59 of 117). ``--verbose``: every run's progress log on
+stderr, each line prefixed with its level and definition.
 """
 
 from __future__ import annotations
@@ -43,8 +45,9 @@ def first_step_case():
     return parse_case(data, CASE.parent)
 
 
-def one_run(level: int, surface: str, folder: Path, first_step: bool = False) -> dict:
-    """Run one analysis in this process (a child) and return its figures."""
+def one_run(level: int, surface: str, folder: Path, first_step: bool = False, verbose: bool = False) -> dict:
+    """Run one analysis in this process (a child) and return its figures; ``verbose``: its
+    progress log on stderr."""
     import resource
 
     import cgfem.solve.static as static
@@ -64,7 +67,9 @@ def one_run(level: int, surface: str, folder: Path, first_step: bool = False) ->
 
     static.factorize = counting
     case = first_step_case() if first_step else load_case(CASE)
-    status = run_case(case, level, surface, folder / "out")
+    def log(message: str) -> None:
+        print(f"[L{level} {surface}] {message}", file=sys.stderr, flush=True)
+    status = run_case(case, level, surface, folder / "out", **({"log": log} if verbose else {}))
     summary = json.loads(status.summary.read_text())
     iterations = sum(len(r) - 1 for s in summary["steps"] for r in s["pass_residuals"])
     solve = summary["timings"]["solve_s"]
@@ -77,15 +82,17 @@ def one_run(level: int, surface: str, folder: Path, first_step: bool = False) ->
             "peak_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
 
 
-def _child(level: int, surface: str, tmp: str, env: dict | None, first_step: bool) -> subprocess.Popen:
+def _child(level: int, surface: str, tmp: str, env: dict | None, first_step: bool,
+           verbose: bool) -> subprocess.Popen:
     code = (f"import json, sys; sys.path.insert(0, {str(REPO / 'benchmarks')!r}); import bench_fit; "
             f"from pathlib import Path; "
-            f"print(json.dumps(bench_fit.one_run({level}, {surface!r}, Path({tmp!r}), {first_step!r})))")
-    return subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=env)
+            f"print(json.dumps(bench_fit.one_run({level}, {surface!r}, Path({tmp!r}), {first_step!r}, {verbose!r})))")
+    # verbose: the child's log goes straight to this process's stderr (its errors too)
+    return subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
+                            stderr=None if verbose else subprocess.PIPE, text=True, env=env)
 
 
-def main(levels: list[int], parallel: bool = False, first_step: bool = False) -> None:
+def main(levels: list[int], parallel: bool = False, first_step: bool = False, verbose: bool = False) -> None:
     rows = []
     env = None
     if parallel:
@@ -96,12 +103,13 @@ def main(levels: list[int], parallel: bool = False, first_step: bool = False) ->
         groups = [SURFACES] if parallel else [(s,) for s in SURFACES]
         for group in groups:
             tmps = [tempfile.TemporaryDirectory() for _ in group]
-            children = [_child(level, surface, t.name, env, first_step) for surface, t in zip(group, tmps)]
+            children = [_child(level, surface, t.name, env, first_step, verbose) for surface, t in zip(group, tmps)]
             for surface, child, tmp in zip(group, children, tmps):
                 stdout, stderr = child.communicate()
                 tmp.cleanup()
                 if child.returncode != 0:
-                    print(f"{level:>2} {surface:9} error: {(stderr.strip().splitlines() or ['?'])[-1]}", flush=True)
+                    last = (stderr or "").strip().splitlines() or ["see the log above"]
+                    print(f"{level:>2} {surface:9} error: {last[-1]}", flush=True)
                     continue
                 r = json.loads(stdout.strip().splitlines()[-1])
                 rows.append(r)
@@ -124,5 +132,6 @@ if __name__ == "__main__":
     parser.add_argument("levels", nargs="*", type=int, default=[1, 2])
     parser.add_argument("--parallel", action="store_true", help="both definitions of a level at once, one thread each")
     parser.add_argument("--first-step", action="store_true", help="only the first load step")
+    parser.add_argument("--verbose", action="store_true", help="every run's progress log on stderr")
     args = parser.parse_args()
-    main(args.levels, parallel=args.parallel, first_step=args.first_step)
+    main(args.levels, parallel=args.parallel, first_step=args.first_step, verbose=args.verbose)
