@@ -68,8 +68,9 @@ def one_run(level: int, surface: str, folder: Path, first_step: bool = False, ve
     static.factorize = counting
     case = first_step_case() if first_step else load_case(CASE)
     def log(message: str) -> None:
-        print(f"[L{level} {surface}] {message}", file=sys.stderr, flush=True)
-    status = run_case(case, level, surface, folder / "out", **({"log": log} if verbose else {}))
+        if verbose:
+            print(f"[L{level} {surface}] {message}", file=sys.stderr, flush=True)
+    status = run_case(case, level, surface, folder / "out", log=log)
     summary = json.loads(status.summary.read_text())
     iterations = sum(len(r) - 1 for s in summary["steps"] for r in s["pass_residuals"])
     solve = summary["timings"]["solve_s"]

@@ -107,9 +107,9 @@ def _fit_like_system(drop_rows: int = 4, seed: int = 1):
 def test_truncated_fit_rows_make_a_close_preconditioner(symmetric):
     """On a fit-like system the preconditioner with the exact rows of ``C`` leaves GMRES
     next to nothing to do; with their entries below DROP of a row's largest dropped, a few
-    tens of iterations (38 measured; 20 at drop 3e-2); keeping only each row's largest
-    entries (drop 0.5), several times more (272). Rows of controls the contact tangent does not touch are not
-    computed."""
+    tens of iterations (38 measured, both symmetries; 20 at drop 3e-2); keeping only each
+    row's largest entries (drop 0.5), several times more (272). Rows of controls the contact
+    tangent does not touch are not computed."""
     from cgfem.solve import saddle
     A, b, n_u, c = _fit_like_system()
 
@@ -121,7 +121,7 @@ def test_truncated_fit_rows_make_a_close_preconditioner(symmetric):
         return solver.info["iterations"][-1]
     exact, default, rough = iterations(1e-12), iterations(saddle.DROP), iterations(0.5)
     assert exact <= 3
-    assert default <= 45
+    assert default <= 40
     assert rough >= 5 * default
     rows = saddle.ReducedSaddleSolver(A, n_u, [c], symmetric, None, preconditioner="superlu")._fit_rows(
         c, np.arange(12, 3 * 24))

@@ -22,7 +22,7 @@ applied matrix-free in a Krylov solver preconditioned by the sparse ``P = K + C~
 enter ``Kc``), each without its entries below :data:`DROP` of its largest: ``M^-1`` of a
 B-spline mass matrix decays fast away from the diagonal, so a row keeps a few knot spans
 around its control: ``P`` stays nearly as sparse as nurbs_fe's matrix (chain2_steel at
-level 2: 1.11 times its nonzeros per unknown, denser in the contact zone) while ``P^-1 S``
+level 2: 1.13 times its nonzeros per unknown at the widest, denser in the contact zone) while ``P^-1 S``
 is close to the identity (GMRES: chain3 16 iterations at level 2, chain2_steel 27). ``P`` is
 factorized by a direct backend (``preconditioner="pardiso"``, ``"superlu"``), which needs
 the memory of the bodies' own factorization instead of the whole saddle point's, or
@@ -78,6 +78,8 @@ class FitConstraint:
         symmetric, so row ``i`` of ``M^-1`` is ``M^-1 e_i``; rows not asked for before are
         computed :data:`ROW_CHUNK` at a time and kept."""
         m, n_nodes = self.G.shape
+        if controls.size == 0:
+            return sp.csr_matrix((m, n_nodes))
         kept = self._rows.setdefault(drop, {})
         missing = np.array([i for i in controls.tolist() if i not in kept], np.int64)
         for start in range(0, missing.size, ROW_CHUNK):
@@ -90,14 +92,11 @@ class FitConstraint:
             for k, i in enumerate(chunk.tolist()):
                 a, b = rows.indptr[k], rows.indptr[k + 1]
                 kept[i] = (rows.indices[a:b].copy(), rows.data[a:b].copy())
-        counts = np.array([kept[i][0].size for i in controls.tolist()], np.int64)
-        indptr = np.zeros(m + 1, np.int64)
-        np.add.at(indptr, np.asarray(controls, np.int64) + 1, counts)
-        if controls.size == 0:
-            return sp.csr_matrix((m, n_nodes))
+        counts = np.zeros(m + 1, np.int64)                 # row i's entries at i + 1
+        counts[np.asarray(controls, np.int64) + 1] = [kept[i][0].size for i in controls.tolist()]
         indices = np.concatenate([kept[i][0] for i in controls.tolist()])
         data = np.concatenate([kept[i][1] for i in controls.tolist()])
-        return sp.csr_matrix((data, indices, np.cumsum(indptr)), shape=(m, n_nodes))
+        return sp.csr_matrix((data, indices, np.cumsum(counts)), shape=(m, n_nodes))
 
 
 class ReducedSaddleSolver(LinearSolver):
@@ -109,8 +108,6 @@ class ReducedSaddleSolver(LinearSolver):
     def __init__(self, A: sp.csr_matrix, n_u: int, constraints: list[FitConstraint], symmetric: bool,
                  near_null: np.ndarray | None, rtol: float = 1e-10, max_iterations: int = 1000,
                  preconditioner: str = "pyamg", drop: float = DROP) -> None:
-        import pyamg
-
         super().__init__(A.shape[0])
         if preconditioner != "pyamg":
             self.backend = f"saddle-{preconditioner}"
@@ -141,6 +138,8 @@ class ReducedSaddleSolver(LinearSolver):
             self.info["factor_nnz"] = int(factor.info.get("factor_nnz", 0))
             self._precondition = factor.solve_unchecked
             return
+        import pyamg
+
         s = 1.0 / np.sqrt(d)
         Ps = (sp.diags(s) @ P @ sp.diags(s)).tocsr()
         B = None if near_null is None else near_null[:n_u] / s[:, None]
