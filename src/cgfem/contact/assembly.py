@@ -198,6 +198,10 @@ class ContactSet:
         """Every fitted patch with its control displacements ``V = T Z`` (n_ctrl, 3) at ``u``."""
         return [(b, b.fit.T @ u[b.z].reshape(-1, 3)) for b in self.blocks]
 
+    def gaps(self, u: np.ndarray) -> list[np.ndarray]:
+        """Every pair's slave-point gaps at ``u`` (NaN: no master hit)."""
+        return [p.gaps(*self._split(u, k)) for k, p in enumerate(self.pairs)]
+
     def points(self, u: np.ndarray) -> list[ContactPoints]:
         return [p.points(*self._split(u, k)) for k, p in enumerate(self.pairs)]
 

@@ -339,6 +339,12 @@ class ContactPair:
                     st.held_active[hold] = active[hold]
         st.active, st.hits, st.natural = active, hits, natural
 
+    def gaps(self, u_s: np.ndarray, u_m: np.ndarray) -> np.ndarray:
+        """Every slave point's gap at ``(u_s, u_m)`` (n,), NaN without a master hit; the
+        active set and pairing are not recorded."""
+        hits = self.search(u_s, u_m)[1]
+        return np.where(hits.found, hits.g, np.nan)
+
     # -- outputs ---------------------------------------------------------------------------
     def points(self, u_s: np.ndarray, u_m: np.ndarray) -> ContactPoints:
         """The slave points at ``(u_s, u_m)`` with their gaps, pressures and weights."""
