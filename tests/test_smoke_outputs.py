@@ -179,21 +179,38 @@ def test_chain2_links_are_in_equilibrium(runs):
             assert np.abs(pulled + run.contact_force(k)).max() <= CHAIN2_BALANCE * scale, (run.folder, k)
 
 
+def last_orders(residuals: list[float], floor: float = 1e-11) -> list[float]:
+    """The three-point orders ``log(r3/r2) / log(r2/r1)`` of the last two windows whose first
+    two residuals are above ``floor`` times the first residual. The third may be round-off: a
+    residual at round-off is no smaller than the true one, so its window can only read low."""
+    r = [float(x) for x in residuals]
+    above = [k for k in range(1, len(r) - 1) if min(r[k - 1], r[k]) > floor * r[0]]
+    return [math.log(r[k + 1] / r[k]) / math.log(r[k] / r[k - 1]) for k in above[-2:]]
+
+
 def test_chain2_steel_newton_ends_quadratically(runs):
     """chain2_steel with facets and nurbs_fe, every level the results hold: the first Newton
     solve of every step (full Newton; later passes start from the kept factorization) ends
-    with an observed order >= 1.8 over its last three residuals above round-off (1e-11 of its
-    first). Not asserted for nurbs_fit: its tangent equals the finite differences of its
-    residual (tests/test_contact_fitted.py), but the order dips at some steps (1.52 measured at
-    level 0, step 2: 1e-3, 5.3e-6, 1.7e-9; 1.65 at level 1, step 5; >= 2.0 at level 2)."""
-    from cgfem.solve.newton import observed_order
+    quadratically, read from the residuals of the summary: one of its last two three-point
+    windows (:func:`last_orders`) reads >= 1.8. A linearly converging end (a tangent off by
+    1e-3: ``r+ ~ 1e-3 r``) reads about 1 in both and fails.
+
+    One window is not enough: the residual's constant ``r+/r^2`` depends on the direction of
+    the remaining error (the penalty beside nearly free sliding), and a single window swings
+    from 0.97 to 58 in the full run of 2026-11-25 (facets, nurbs_fe: the better of the last two
+    is >= 1.91 in every step at levels 0-2). Level 0, nurbs_fe, step 1 with the contact-onset
+    limit: residuals 2.8e-3, 2.1e-5, 7.1e-8, 8.1e-15 of the first read 1.16 and 2.81, while
+    Newton's map there is quadratic along the way it came (tests/test_contact_chain.py
+    measures it on the error). Not asserted for nurbs_fit: its tangent equals the finite
+    differences of its residual (tests/test_contact_fitted.py), but its windows read 0.38-3.37
+    (the better of two >= 1.80)."""
     steel = [r for r in runs if r.case == "chain2_steel" and r.n_steps > 0 and r.surface != "nurbs_fit"]
     assert steel, "no chain2_steel runs"
     for run in steel:
-        orders = [observed_order(step["pass_residuals"][0], floor=1e-11) for step in run.steps]
-        measured = [q for q in orders if math.isfinite(q)]
-        assert measured, f"{run.folder}: no step with three residuals above round-off"
-        assert min(measured) >= 1.8, f"{run.folder}: orders per step {orders}"
+        orders = [last_orders(step["pass_residuals"][0]) for step in run.steps]
+        measured = [max(q) for q in orders if q]
+        assert measured, f"{run.folder}: no step with two residuals above round-off"
+        assert min(measured) >= 1.8, f"{run.folder}: last two orders per step {orders}"
 
 
 def test_chain3_links_carry_the_pull_through_contact(runs):
