@@ -84,12 +84,16 @@ def record_errors(monkeypatch) -> list[dict]:
         errors = [float(np.linalg.norm(v - u)) for v in accepted]
         # the order of Newton's map along the direction of the last iterate whose image is
         # measurable: its next error is above FLOOR (round-off is ~1e-15 of the first error)
-        k = max(k for k in range(len(errors) - 1) if errors[k + 1] > FLOOR * errors[0])
-        d = (accepted[k] - u) / errors[k]
-        new = [float(np.linalg.norm(step(u + eps * d) - u)) for eps in (errors[k], errors[k] / SHRINK)]
+        # (none: a solve that ends in one step; its order and constant are NaN, and fail)
+        k = max((k for k in range(len(errors) - 1) if errors[k + 1] > FLOOR * errors[0]), default=None)
+        order = constant = float("nan")
+        if k is not None:
+            d = (accepted[k] - u) / errors[k]
+            new = [float(np.linalg.norm(step(u + eps * d) - u)) for eps in (errors[k], errors[k] / SHRINK)]
+            order = float(np.log(new[0] / new[1]) / np.log(SHRINK))
+            constant = errors[k + 1] / errors[k] ** 2 * errors[0]
         solves.append({"errors": errors, "residuals": list(result.residuals), "tail": tail,
-                       "order": float(np.log(new[0] / new[1]) / np.log(SHRINK)),
-                       "constant": errors[k + 1] / errors[k] ** 2 * errors[0]})
+                       "order": order, "constant": constant})
         return result
     monkeypatch.setattr(static, "newton", wrapped)
     return solves
@@ -111,7 +115,7 @@ def test_newton_is_quadratic_in_every_step_of_the_steel_chain_at_level_1(tmp_pat
         assert solve["tail"][1] <= 1e-13 * solve["errors"][0]
     orders = [solve["order"] for solve in solves]
     constants = [solve["constant"] for solve in solves]
-    assert min(orders) >= 1.8, orders
+    assert all(q >= 1.8 for q in orders), orders
     # and the iterates themselves end quadratically: measured 0.7-13 (relative errors); with
     # the 1e-3 step error, 1e-3 / e_k is in the hundreds or more
-    assert max(constants) <= 100.0, constants
+    assert all(c <= 100.0 for c in constants), constants

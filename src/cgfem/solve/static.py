@@ -219,16 +219,22 @@ class System:
         chain3 the onset limit made things worse: with facets at level 2 two cut-backs and
         4 steps (60 Newton iterations) instead of 1 (25), at level 1 two cut-backs instead
         of none, nurbs_fit at level 2 31 iterations instead of 24."""
-        if not self.contact or self.floating:
+        if not self.contact or self.floating or not np.isfinite(ONSET_PENETRATION):
+            return du
+        pairs = self.contact.pairs
+        allowed = [ONSET_PENETRATION * pair.slave_space.h for pair in pairs]
+        after = self.contact.gaps(u + du)
+        # a point goes no deeper than -g(u + du): the gaps at u are searched only if that is
+        # beyond the allowance somewhere (the contact's onset, not a settled contact's steps)
+        if all(np.nan_to_num(-g, nan=0.0).max(initial=0.0) <= a for g, a in zip(after, allowed)):
             return du
         factor = 1.0
-        for pair, before, after in zip(self.contact.pairs, self.contact.gaps(u), self.contact.gaps(u + du)):
-            seen = np.isfinite(after)
-            deeper = np.minimum(np.nan_to_num(before[seen], nan=0.0), 0.0) - after[seen]
+        for before, end, a in zip(self.contact.gaps(u), after, allowed):
+            seen = np.isfinite(end)
+            deeper = np.minimum(np.nan_to_num(before[seen], nan=0.0), 0.0) - end[seen]
             depth = float(deeper.max(initial=0.0))
-            allowed = ONSET_PENETRATION * pair.slave_space.h
-            if depth > allowed:
-                factor = min(factor, allowed / depth)
+            if depth > a:
+                factor = min(factor, a / depth)
         return du if factor == 1.0 else factor * du
 
     def limit_step(self, du: np.ndarray) -> np.ndarray:
@@ -539,13 +545,14 @@ def _solve_increment(system: System, solver: _Solver, u0: np.ndarray,
         def attempt(start: np.ndarray, fixed_tangent: bool) -> NewtonResult:
             solver.frozen = fixed_tangent
             tic = time.perf_counter()
-            first = [True]
+            first = True
 
             def limit(du: np.ndarray) -> np.ndarray:
                 # newton's first step starts from ``start``
+                nonlocal first
                 du = system.limit_step(du)
-                if first[0]:
-                    first[0] = False
+                if first:
+                    first = False
                     du = system.limit_onset(start, du)
                 return du
             try:
