@@ -31,8 +31,9 @@ boundary with the grid edges (paper, "Surface topology with the Marching cubes a
    the (convex) element, and neighbours share the segments of their common face, so the
    surface is closed. ``FacetBoundary.misoriented`` counts triangles whose normal opposes
    the mean exact normal of their crossings (a diagnostic; the orientation is topological).
-3. A triangle's patch is the majority patch of its crossing vertices (ties: the first in loop
-   order). A facet point has no exact parameters: its quadrature points carry the triangle
+3. A triangle's patch is that of the crossing of its loop whose exact normal is closest to
+   the triangle's (:func:`_facing_patch`): a triangle belongs to the side of a seam it faces.
+   A facet point has no exact parameters: its quadrature points carry the triangle
    (``piece``) and their barycentric coordinates ``(l1, l2)`` in it as ``uv``.
 
 Element status for facets: OUTSIDE (all nodes outside), INSIDE (all inside), CUT (mixed).
@@ -137,17 +138,17 @@ MISORIENTED_COS = -0.5
 
 
 @njit(cache=True)
-def _facet_kernel(cut, shape, node_inside, vkeys, vpos, vpatch, fkeys, finside,
+def _facet_kernel(cut, shape, node_inside, vkeys, vpos, fkeys, finside,
                   corners, edges, faces, face_lower, face_edges,
-                  tri, tri_vid, tri_elem, tri_patch, seg, seg_elem, seg_face, seg_fkey, counts):
+                  tri, tri_vid, tri_elem, tri_loop, seg, seg_elem, seg_face, seg_fkey, counts):
     """Marching-cubes loops and fan triangles of the ``cut`` elements (see module docstring).
 
     cut (n,) element ids; shape (3,) elements per axis; node_inside (n_nodes,);
     vkeys (nv,) sorted edge keys ``axis * n_nodes + lower node id`` of the crossings at
-    vpos (nv, 3) with vpatch (nv,); fkeys (nf,) sorted face keys ``axis * n_nodes + lowest
+    vpos (nv, 3); fkeys (nf,) sorted face keys ``axis * n_nodes + lowest
     node id`` of the ambiguous faces with the centre status finside (nf,).
     Outputs (capacity 12 n): tri (., 3, 3), tri_vid (., 3) crossing ids (-1: a centroid),
-    tri_elem, tri_patch; seg (., 2) crossing ids of the face segments (material on the left
+    tri_elem, tri_loop (the loop each triangle is cut from, numbered from 0); seg (., 2) crossing ids of the face segments (material on the left
     seen from outside the element), seg_elem, seg_face (0..5), seg_fkey; counts = [n_tri,
     n_seg, n_errors].
     """
@@ -162,6 +163,7 @@ def _facet_kernel(cut, shape, node_inside, vkeys, vpos, vpatch, fkeys, finside,
     loop = np.empty(12, np.int64)
     nt = 0
     ns = 0
+    n_loops = 0
     for e in range(cut.size):
         el = cut[e]
         i = el // (shape[1] * shape[2])
@@ -242,9 +244,9 @@ def _facet_kernel(cut, shape, node_inside, vkeys, vpos, vpatch, fkeys, finside,
                     tri_vid[nt, r] = v
                     for d in range(3):
                         tri[nt, r, d] = vpos[v, d]
-                pa, pb, pc = vpatch[tri_vid[nt, 0]], vpatch[tri_vid[nt, 1]], vpatch[tri_vid[nt, 2]]
-                tri_patch[nt] = pb if (pb == pc and pa != pb) else pa
                 tri_elem[nt] = el
+                tri_loop[nt] = n_loops
+                n_loops += 1
                 nt += 1
                 continue
             centre = np.zeros(3)
@@ -261,9 +263,10 @@ def _facet_kernel(cut, shape, node_inside, vkeys, vpos, vpatch, fkeys, finside,
                     tri[nt, 0, d] = centre[d]
                     tri[nt, 1, d] = vpos[va, d]
                     tri[nt, 2, d] = vpos[vb, d]
-                tri_patch[nt] = vpatch[va]  # two crossings: a tie unless equal, the first
                 tri_elem[nt] = el
+                tri_loop[nt] = n_loops
                 nt += 1
+            n_loops += 1
     counts[0] = nt
     counts[1] = ns
 
@@ -500,6 +503,35 @@ def _ambiguous_faces(index: SurfaceIndex, grid: CartesianGrid, inside3: np.ndarr
     return keys[order], inside
 
 
+def _facing_patch(cross: np.ndarray, tri_vid: np.ndarray, tri_loop: np.ndarray,
+                  vpatch: np.ndarray, vnormal: np.ndarray) -> np.ndarray:
+    """Patch of each triangle: that of the crossing of its loop whose exact normal is closest
+    to the triangle's (``cross`` (m, 3) its normal, any length; ``tri_vid`` (m, 3) its
+    crossings, -1 for a fan centre; ``tri_loop`` (m,) its loop, numbered from 0).
+
+    Where a loop's crossings lie on one patch this is that patch. A loop across a seam of
+    the boundary (a box's edge, a cap's rim) gives each triangle the side it faces: a fan of
+    steep triangles that carries a box's side face up to the crossings on its top face stays
+    on the side, where a vote over each triangle's own crossings gives the triangles whose
+    crossings both lie on the top (the fan's centre is no crossing) to the top.
+    """
+    pairs = np.unique(np.column_stack([np.repeat(tri_loop, 3), tri_vid.ravel()]), axis=0)
+    pairs = pairs[pairs[:, 1] >= 0]
+    start = np.searchsorted(pairs[:, 0], np.arange(tri_loop.max(initial=-1) + 2))
+    width = int(np.diff(start).max(initial=0))
+    best = np.full(tri_loop.size, -np.inf)
+    patch = np.zeros(tri_loop.size, np.int64)
+    for r in range(width):                        # the loop's r-th crossing, where it has one
+        at = start[tri_loop] + r
+        has = np.flatnonzero(at < start[tri_loop + 1])
+        v = pairs[at[has], 1]
+        score = np.einsum("ij,ij->i", cross[has], vnormal[v])
+        better = score > best[has]
+        best[has[better]] = score[better]
+        patch[has[better]] = vpatch[v[better]]
+    return patch
+
+
 def facet_embedding_parts(solid: Solid, grid: CartesianGrid, index: SurfaceIndex | None = None,
                           degree: int = DEFAULT_DEGREE, points: int = DEFAULT_POINTS) -> FacetBoundary:
     """The marching-cubes polyhedron of ``solid`` in ``grid`` with its surface rule of total
@@ -521,17 +553,17 @@ def facet_embedding_parts(solid: Solid, grid: CartesianGrid, index: SurfaceIndex
     cut = np.flatnonzero(status == CUT)
     cap = 12 * cut.size
     tri, tri_vid = np.empty((cap, 3, 3)), np.empty((cap, 3), np.int64)
-    tri_elem, tri_patch = np.empty(cap, np.int64), np.empty(cap, np.int64)
+    tri_elem, tri_loop = np.empty(cap, np.int64), np.empty(cap, np.int64)
     seg, seg_elem = np.empty((cap, 2), np.int64), np.empty(cap, np.int64)
     seg_face, seg_fkey = np.empty(cap, np.int64), np.empty(cap, np.int64)
     counts = np.zeros(3, np.int64)
-    _facet_kernel(cut, np.asarray(grid.shape, np.int64), node_inside, vkey, vx, vpatch, fkeys, finside,
+    _facet_kernel(cut, np.asarray(grid.shape, np.int64), node_inside, vkey, vx, fkeys, finside,
                   _CORNERS, _EDGES, _FACES, _FACE_LOWER, _FACE_EDGES,
-                  tri, tri_vid, tri_elem, tri_patch, seg, seg_elem, seg_face, seg_fkey, counts)
+                  tri, tri_vid, tri_elem, tri_loop, seg, seg_elem, seg_face, seg_fkey, counts)
     if counts[2]:
         raise RuntimeError(f"marching cubes: {counts[2]} inconsistent edges, faces or loops")
     nt, ns = int(counts[0]), int(counts[1])
-    tri, tri_vid, tri_elem, tri_patch = tri[:nt], tri_vid[:nt], tri_elem[:nt], tri_patch[:nt]
+    tri, tri_vid, tri_elem, tri_loop = tri[:nt], tri_vid[:nt], tri_elem[:nt], tri_loop[:nt]
 
     # material interval of each cut element's z edge (x_{i+1}, y_{j+1}) on the polyhedron
     ijk = grid.element_ijk(cut)
@@ -550,6 +582,7 @@ def facet_embedding_parts(solid: Solid, grid: CartesianGrid, index: SurfaceIndex
         has = tri_vid[:, r] >= 0
         mean_normal[has] += vnormal[tri_vid[has, r]]
     cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    tri_patch = _facing_patch(cross, tri_vid, tri_loop, vpatch, vnormal)
     twice_area = np.linalg.norm(cross, axis=1)
     size = twice_area * np.linalg.norm(mean_normal, axis=1)
     misoriented = int(np.sum((np.einsum("ij,ij->i", cross, mean_normal) < MISORIENTED_COS * size)
