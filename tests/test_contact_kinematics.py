@@ -94,11 +94,10 @@ def test_gap_is_the_distance_along_the_normal(definition):
     pair.assemble(np.zeros(n_s), np.zeros(n_m), False)
     hits, X = pair.state.hits, pair.frames.X
     # facets chamfer the box's edges: their tilted triangles look sideways, past the sphere
-    # (0.58 of the points look straight down with facets: enough to check the gap on)
     normal_z = np.cross(pair.frames.A, pair.frames.B)[:, 2] / np.linalg.norm(
         np.cross(pair.frames.A, pair.frames.B), axis=1)
     down = normal_z < -0.999
-    assert down.mean() > 0.5
+    assert down.mean() > 0.6
     assert hits.found[down].all()
     found = hits.found & down
     exact = 0.93 - np.sqrt(1.0 - X[found, 0] ** 2 - X[found, 1] ** 2)

@@ -139,15 +139,15 @@ def test_surface_is_closed_and_volume_rule_matches_it(name):
         assert set(fb.triangle_patch[mine]) <= set(fb.vertex_patch[crossings[crossings >= 0]])
 
 
-def test_triangles_take_the_patch_they_face():
+def test_triangles_in_a_face_take_its_patch():
     """A box whose side faces lie 1e-9 beyond grid planes (x and y), its top and bottom
     between planes: every node on the sides' planes is inside, so the polyhedron is the box
-    but for slivers 1e-9 thick along its edges. Each face's
-    triangles must then cover that face exactly, with its normal. The loops of the cells
-    outside a side face join the side's crossings (on the x or y edges of those cells) to the
-    top's (on the z edges at the nodes of the side's plane): a vote over each fan triangle's
-    own crossings gave the top the steep triangles with two top crossings (the x-min face
-    kept 0.0592 of its 0.0672 m^2)."""
+    but for slivers 1e-9 thick along its edges, and each face's triangles must cover that
+    face exactly, with its normal. The loops of the cells outside a side face join the
+    side's crossings (on the x or y edges of those cells) to the top's (on the z edges at
+    the nodes of the side's plane); the fan triangles whose two crossings lie on the top lie
+    in the side's plane. A vote over each triangle's own crossings gives them to the top
+    (the x-min face kept 0.0592 of its 0.0672 m^2)."""
     eps = 1e-9
     spec = BoxSpec(min=(-eps, -0.08 - eps, 0.173), max=(0.32 + eps, 0.24 + eps, 0.383))
     solid = build_solid(spec)
@@ -287,6 +287,6 @@ def test_kernel_matches_its_python_run():
     assert errors == 0 and nt == len(fb.triangles) and ns == len(fb.segments)
     assert np.array_equal(out[0][:nt], fb.triangles)
     cross = np.cross(fb.triangles[:, 1] - fb.triangles[:, 0], fb.triangles[:, 2] - fb.triangles[:, 0])
-    patch = mod._facing_patch(cross, out[1][:nt], out[3][:nt], fb.vertex_patch, fb.vertex_normal)
+    patch = mod._triangle_patch(cross, out[1][:nt], out[3][:nt], fb.vertex_patch, fb.vertex_normal)
     assert np.array_equal(patch, fb.triangle_patch)
     assert np.array_equal(out[4][:ns], fb.segments) and np.array_equal(out[5][:ns], fb.segment_element)

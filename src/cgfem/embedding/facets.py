@@ -31,8 +31,8 @@ boundary with the grid edges (paper, "Surface topology with the Marching cubes a
    the (convex) element, and neighbours share the segments of their common face, so the
    surface is closed. ``FacetBoundary.misoriented`` counts triangles whose normal opposes
    the mean exact normal of their crossings (a diagnostic; the orientation is topological).
-3. A triangle's patch is that of the crossing of its loop whose exact normal is closest to
-   the triangle's (:func:`_facing_patch`): a triangle belongs to the side of a seam it faces.
+3. A triangle's patch (:func:`_triangle_patch`): that of a crossing of its loop in whose
+   face's plane it lies, else the majority patch of its own crossings (ties: the first).
    A facet point has no exact parameters: its quadrature points carry the triangle
    (``piece``) and their barycentric coordinates ``(l1, l2)`` in it as ``uv``.
 
@@ -503,29 +503,38 @@ def _ambiguous_faces(index: SurfaceIndex, grid: CartesianGrid, inside3: np.ndarr
     return keys[order], inside
 
 
-def _facing_patch(cross: np.ndarray, tri_vid: np.ndarray, tri_loop: np.ndarray,
-                  vpatch: np.ndarray, vnormal: np.ndarray) -> np.ndarray:
-    """Patch of each triangle: that of the crossing of its loop whose exact normal is closest
-    to the triangle's (``cross`` (m, 3) its normal, any length; ``tri_vid`` (m, 3) its
-    crossings, -1 for a fan centre; ``tri_loop`` (m,) its loop, numbered from 0).
+#: a triangle lies in the plane of a crossing's face when its unit normal is this close
+#: to the crossing's exact normal (``1 - cos``); flat faces give ~1e-16, chamfers ~1e-1
+IN_PLANE = 1e-10
 
-    Where a loop's crossings lie on one patch this is that patch. A loop across a seam of
-    the boundary (a box's edge, a cap's rim) gives each triangle the side it faces: a fan of
-    steep triangles that carries a box's side face up to the crossings on its top face stays
-    on the side, where a vote over each triangle's own crossings gives the triangles whose
-    crossings both lie on the top (the fan's centre is no crossing) to the top.
+
+def _triangle_patch(cross: np.ndarray, tri_vid: np.ndarray, tri_loop: np.ndarray,
+                    vpatch: np.ndarray, vnormal: np.ndarray) -> np.ndarray:
+    """Patch of each triangle (``cross`` (m, 3) its normal, any length; ``tri_vid`` (m, 3)
+    its crossings, -1 for a fan centre; ``tri_loop`` (m,) its loop, numbered from 0).
+
+    A triangle that lies in the plane of a crossing of its loop (its normal within
+    ``IN_PLANE`` of that crossing's exact normal) takes that crossing's patch: where a box's
+    side face lies just beyond a grid plane, the cells outside it join the side's crossings
+    to the top's, and the fan triangles whose two crossings lie on the top still lie in the
+    side's plane. Any other triangle (a chamfer across a seam, a curved surface) takes the
+    majority patch of its own crossings, ties to the first.
     """
+    pa = vpatch[np.maximum(tri_vid[:, 0], 0)]
+    pb, pc = vpatch[tri_vid[:, 1]], vpatch[tri_vid[:, 2]]
+    fan = tri_vid[:, 0] < 0
+    patch = np.where(fan, pb, np.where((pb == pc) & (pa != pb), pb, pa))
+    unit = cross / np.maximum(np.linalg.norm(cross, axis=1), 1e-300)[:, None]
     pairs = np.unique(np.column_stack([np.repeat(tri_loop, 3), tri_vid.ravel()]), axis=0)
     pairs = pairs[pairs[:, 1] >= 0]
     start = np.searchsorted(pairs[:, 0], np.arange(tri_loop.max(initial=-1) + 2))
     width = int(np.diff(start).max(initial=0))
-    best = np.full(tri_loop.size, -np.inf)
-    patch = np.zeros(tri_loop.size, np.int64)
+    best = np.full(tri_loop.size, 1.0 - IN_PLANE)
     for r in range(width):                        # the loop's r-th crossing, where it has one
         at = start[tri_loop] + r
         has = np.flatnonzero(at < start[tri_loop + 1])
         v = pairs[at[has], 1]
-        score = np.einsum("ij,ij->i", cross[has], vnormal[v])
+        score = np.einsum("ij,ij->i", unit[has], vnormal[v])
         better = score > best[has]
         best[has[better]] = score[better]
         patch[has[better]] = vpatch[v[better]]
@@ -582,7 +591,7 @@ def facet_embedding_parts(solid: Solid, grid: CartesianGrid, index: SurfaceIndex
         has = tri_vid[:, r] >= 0
         mean_normal[has] += vnormal[tri_vid[has, r]]
     cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    tri_patch = _facing_patch(cross, tri_vid, tri_loop, vpatch, vnormal)
+    tri_patch = _triangle_patch(cross, tri_vid, tri_loop, vpatch, vnormal)
     twice_area = np.linalg.norm(cross, axis=1)
     size = twice_area * np.linalg.norm(mean_normal, axis=1)
     misoriented = int(np.sum((np.einsum("ij,ij->i", cross, mean_normal) < MISORIENTED_COS * size)
