@@ -142,7 +142,7 @@ def test_refined_fit_transmits_the_force_exactly(tmp_path):
 #: ``facets``: both grids with planes at x, y = 0 and 1 (h0 = 1/4, offset 0 along x and y),
 #: the boxes' side faces 1e-9 beyond them, so every node on those planes is inside and the
 #: marching-cubes polyhedra are the boxes but for slivers 1e-9 thick along their edges
-#: (:func:`tests.test_facets.test_triangles_take_the_patch_they_face`). Offsets along z differ.
+#: (``test_facets.test_triangles_in_a_face_take_its_patch``). Offsets along z differ.
 SIDE = 1e-9
 FACETS_GRIDS = ({"h0": 0.25, "offset": [0.0, 0.0, 0.41]}, {"h0": 0.25, "offset": [0.0, 0.0, 0.57]})
 

@@ -145,12 +145,12 @@ def _facet_kernel(cut, shape, node_inside, vkeys, vpos, fkeys, finside,
 
     cut (n,) element ids; shape (3,) elements per axis; node_inside (n_nodes,);
     vkeys (nv,) sorted edge keys ``axis * n_nodes + lower node id`` of the crossings at
-    vpos (nv, 3); fkeys (nf,) sorted face keys ``axis * n_nodes + lowest
-    node id`` of the ambiguous faces with the centre status finside (nf,).
-    Outputs (capacity 12 n): tri (., 3, 3), tri_vid (., 3) crossing ids (-1: a centroid),
-    tri_elem, tri_loop (the loop each triangle is cut from, numbered from 0); seg (., 2) crossing ids of the face segments (material on the left
-    seen from outside the element), seg_elem, seg_face (0..5), seg_fkey; counts = [n_tri,
-    n_seg, n_errors].
+    vpos (nv, 3); fkeys (nf,) sorted face keys ``axis * n_nodes + lowest node id`` of the
+    ambiguous faces with the centre status finside (nf,). Outputs (capacity 12 n): tri
+    (., 3, 3), tri_vid (., 3) crossing ids (-1: a centroid), tri_elem, tri_loop (the loop a
+    triangle is cut from, from 0); seg (., 2) crossing ids of the face segments (material on
+    the left seen from outside the element), seg_elem, seg_face (0..5), seg_fkey; counts =
+    [n_tri, n_seg, n_errors].
     """
     ny1 = shape[1] + 1
     nz1 = shape[2] + 1
@@ -503,8 +503,7 @@ def _ambiguous_faces(index: SurfaceIndex, grid: CartesianGrid, inside3: np.ndarr
     return keys[order], inside
 
 
-#: a triangle lies in the plane of a crossing's face when its unit normal is this close
-#: to the crossing's exact normal (``1 - cos``); flat faces give ~1e-16, chamfers ~1e-1
+#: ``1 - cos`` below which a triangle lies in a crossing's face (flat: ~1e-16; chamfer: ~0.1)
 IN_PLANE = 1e-10
 
 
@@ -514,10 +513,9 @@ def _triangle_patch(cross: np.ndarray, tri_vid: np.ndarray, tri_loop: np.ndarray
     its crossings, -1 for a fan centre; ``tri_loop`` (m,) its loop, numbered from 0).
 
     A triangle that lies in the plane of a crossing of its loop (its normal within
-    ``IN_PLANE`` of that crossing's exact normal) takes that crossing's patch: where a box's
-    side face lies just beyond a grid plane, the cells outside it join the side's crossings
-    to the top's, and the fan triangles whose two crossings lie on the top still lie in the
-    side's plane. Any other triangle (a chamfer across a seam, a curved surface) takes the
+    ``IN_PLANE`` of that crossing's exact normal) takes that crossing's patch: outside a
+    box's side just beyond a grid plane, fan triangles with two crossings on the top lie in
+    the side. Any other triangle (a chamfer across a seam, a curved surface) takes the
     majority patch of its own crossings, ties to the first.
     """
     pa = vpatch[np.maximum(tri_vid[:, 0], 0)]
