@@ -25,7 +25,7 @@ int_x p dx ~ (a-x)^1.5, on [0.9, 1] x last contact node (much less noisy); a_mom
 p x^2 / int p); p_max = p(0); each over Hertz at the measured P; Richardson on the last three.
 
 Usage: python3 benchmarks/hertz_reference.py [--R 1] [--delta 0.05] [--width 1] [--depth 1]
-       [--levels 4] [--h-contact H] [--pressure-out FILE.csv]
+       [--E-ratio 1] [--levels 4] [--h-contact H] [--pressure-out FILE.csv]
 """
 
 from __future__ import annotations
@@ -109,8 +109,10 @@ class Body:   # K on independent dofs (hanging eliminated), T: full <- independe
     ind: Arr
 
 
-def make_body(leaves: Arr, n0: Arr, lo: Arr, hi: Arr, R: float, polar: bool, delta: float) -> Body:
-    """Q9 mesh, stiffness, hanging-node ties and boundary conditions of body A (polar) or B."""
+def make_body(leaves: Arr, n0: Arr, lo: Arr, hi: Arr, R: float, polar: bool, delta: float,
+              E: float = E_MOD) -> Body:
+    """Q9 mesh, stiffness (Young's modulus E), hanging-node ties and boundary conditions of
+    body A (polar) or B."""
     lv, ci, cj = leaves.T
     Lm = int(lv.max()) + 1
     NJ, f = 2 * n0[1] * (1 << Lm) + 1, 1 << (Lm - lv)
@@ -157,7 +159,7 @@ def make_body(leaves: Arr, n0: Arr, lo: Arr, hi: Arr, R: float, polar: bool, del
     el = nid[np.searchsorted(raw, I * NJ + J)]
     sz = (hi - lo) / n0 / 2.0 ** lv[:, None]
     c0 = lo + np.stack([ci, cj], 1) * sz
-    lam, mu = E_MOD * NU / ((1 + NU) * (1 - 2 * NU)), E_MOD / (2 * (1 + NU))
+    lam, mu = E * NU / ((1 + NU) * (1 - 2 * NU)), E / (2 * (1 + NU))
     Dm = np.array([[lam + 2 * mu, lam, 0], [lam, lam + 2 * mu, 0], [0, 0, mu]])
     gp, gw = np.polynomial.legendre.leggauss(3)
     Ke = np.zeros((len(el), 18, 18))
@@ -344,9 +346,10 @@ def solve_level(A: Body, B: Body, R: float, delta: float, xmax: float, active0: 
 
 
 def run(R: float, delta: float, W: float, D: float, h_c: float, lvl: int, zone: float, grade: float,
-        edge: float = 0.0) -> list[Body]:
+        edge: float = 0.0, e_ratio: float = 1.0) -> list[Body]:
     """Bodies A, B of level `lvl`: level 0 has size h_c on [0, zone], h_c/EDGE_RATIO on
-    [0.94, 1.06] * edge (if edge > 0), growth `grade`; level k = level 0 split k times."""
+    [0.94, 1.06] * edge (if edge > 0), growth `grade`; level k = level 0 split k times.
+    A's Young's modulus is `e_ratio` times B's."""
     r0 = min(W, D, R) / 2
     n0B = np.array([max(1, round(W / r0)), max(1, round(D / r0))])
     boxes = [(np.array([3, 2]), np.array([0.0, 0.0]), np.array([math.pi * R / 2, R]), True),
@@ -359,13 +362,15 @@ def run(R: float, delta: float, W: float, D: float, h_c: float, lvl: int, zone: 
             sg.append((hi[0], hi[0], 0.0, h_c * CORNER))
         else:       # contact edge z = 0; corner (W, -D) between free side and clamped bottom
             sg = [(x0, x1, 0.0, h) for x0, x1, h in segs] + [(W, W, -D, h_c * CORNER)]
-        out.append(make_body(split(quadtree(n0, lo, hi, sg, grade), lvl), n0, lo, hi, R, polar, delta))
+        out.append(make_body(split(quadtree(n0, lo, hi, sg, grade), lvl), n0, lo, hi, R, polar, delta,
+                             E_MOD * (e_ratio if polar else 1.0)))
     return out
 
 
-def hertz(P: float, R: float) -> tuple[float, float]:
-    """Hertz half-width and peak pressure at load P (two equal materials, E* = E/(2(1-nu^2)))."""
-    aH = math.sqrt(4 * P * R / (math.pi * E_MOD / (2 * (1 - NU ** 2))))
+def hertz(P: float, R: float, e_ratio: float = 1.0) -> tuple[float, float]:
+    """Hertz half-width and peak pressure at load P, 1/E* = (1 - nu^2) (1/E_A + 1/E_B) with
+    E_A = e_ratio E_B (equal materials: E* = E/(2(1-nu^2)))."""
+    aH = math.sqrt(4 * P * R / (math.pi * E_MOD / ((1 - NU ** 2) * (1 + 1 / e_ratio))))
     return aH, 2 * P / (math.pi * aH)
 
 
@@ -385,6 +390,7 @@ def main() -> None:
                            ("--width", 1.0, "block half-width W"), ("--depth", 1.0, "block depth D")):
         ap.add_argument(name, type=float, default=val, help=hlp)
     ap.add_argument("--levels", type=int, default=4)
+    ap.add_argument("--E-ratio", type=float, default=1.0, help="the cylinder's Young's modulus over the block's")
     ap.add_argument("--h-contact", type=float, default=None,
                     help="element size on the contact zone of the first (coarsest) level; default a/25")
     ap.add_argument("--pressure-out", default=None, help="CSV of nodal pressures of the finest mesh")
@@ -392,10 +398,10 @@ def main() -> None:
     R, delta, W, D = a.R, a.delta, a.width, a.depth
     xmax, t0 = 0.9 * min(W, R), time.perf_counter()
     z0 = math.sqrt(2 * R * delta)   # half-width of the geometric overlap (over-estimates a)
-    pil = solve_level(*run(R, delta, W, D, z0 / 20, 0, z0, 0.5), R, delta, xmax, z0)
+    pil = solve_level(*run(R, delta, W, D, z0 / 20, 0, z0, 0.5, e_ratio=a.E_ratio), R, delta, xmax, z0)
     a0 = pil["a_edge"]
     zone, h_c = 1.3 * a0, a.h_contact or a0 / 25
-    print(f"# R={R} delta={delta} W={W} D={D} E={E_MOD:g} nu={NU}; plane strain, frictionless, vertical gap in "
+    print(f"# R={R} delta={delta} W={W} D={D} E={E_MOD:g} (cylinder x {a.E_ratio:g}) nu={NU}; plane strain, frictionless, vertical gap in "
           f"the deformed configuration; half model (x>=0, symmetry), P = full width\n# pilot a={a0:.5f} "
           f"({time.perf_counter() - t0:.1f}s); level 0: h_c={h_c:.4g} on x<={zone:.4f}, h_c/{EDGE_RATIO} on "
           f"[0.94,1.06]*{a0:.4f}, growth {GRADE0}; each level splits every element in 4")
@@ -406,11 +412,11 @@ def main() -> None:
     prev: list[Body] = []
     for k in range(a.levels):
         t1 = time.perf_counter()
-        A, B = run(R, delta, W, D, h_c, k, zone, GRADE0, a0)
+        A, B = run(R, delta, W, D, h_c, k, zone, GRADE0, a0, a.E_ratio)
         u0 = (prolong(prev[0], rows[-1]["u"][0], A), prolong(prev[1], rows[-1]["u"][1], B)) if rows else None
         r = solve_level(A, B, R, delta, xmax, rows[-1]["a_edge"] if rows else a0, u0)
         prev = [A, B]
-        aH, p0H = hertz(r["P"], R)
+        aH, p0H = hertz(r["P"], R, a.E_ratio)
         r.update(ae=r["a_edge"] / aH, af=r["a_F"] / aH, am=r["a_mom"] / aH, pp=r["pmax"] / p0H)
         rows.append(r)
         if k == 0 and not 0.94 * a0 < r["a_edge"] < 1.06 * a0:
@@ -429,7 +435,7 @@ def main() -> None:
                           ("pp", "p_max/p0_H"), ("a_F", "a_F [m]"), ("a_mom", "a_moment [m]"), ("pmax", "p_max [Pa]")):
             print("  {:13s} {:14.8g}   order {:5.2f}   {:.2g}".format(name, *richardson([r[key] for r in rows])))
     if a.pressure_out:   # nodal pressures (mortar multipliers) of the finest level, current x
-        r, (aH, p0H) = rows[-1], hertz(rows[-1]["P"], R)
+        r, (aH, p0H) = rows[-1], hertz(rows[-1]["P"], R, a.E_ratio)
         ph = p0H * np.sqrt(np.maximum(0, 1 - (r["x"] / aH) ** 2))
         np.savetxt(a.pressure_out, np.c_[r["x"], r["p"], r["active"], ph], delimiter=",",
                    header="x,p,active,p_hertz_at_measured_P", comments="", fmt="%.9g")
