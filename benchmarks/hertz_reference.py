@@ -39,17 +39,12 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
+from cgfem.reference.elements import lagrange_1d as lag2, plane_strain_matrix
+
 E_MOD, NU = 1.0e7, 0.3
 GRADE0, EDGE_RATIO, CORNER = 0.5, 4, 1.0   # level-0 size growth; edge-band, corner size / h_c
 Arr = np.ndarray
 LA, LB = np.array([0, 1, 2] * 3), np.repeat([0, 1, 2], 3)   # Q9 local node (a, b), index 3b + a
-
-
-def lag2(t: Arr) -> tuple[Arr, Arr]:
-    """1D quadratic Lagrange basis on nodes -1, 0, 1 and its derivative; shape (..., 3)."""
-    t = np.asarray(t, float)
-    return (np.stack([0.5 * t * (t - 1), 1 - t * t, 0.5 * t * (t + 1)], -1),
-            np.stack([t - 0.5, -2 * t, t + 0.5], -1))
 
 
 def quadtree(n0: Arr, lo: Arr, hi: Arr, segs: list[tuple[float, float, float, float]], grade: float) -> Arr:
@@ -159,8 +154,7 @@ def make_body(leaves: Arr, n0: Arr, lo: Arr, hi: Arr, R: float, polar: bool, del
     el = nid[np.searchsorted(raw, I * NJ + J)]
     sz = (hi - lo) / n0 / 2.0 ** lv[:, None]
     c0 = lo + np.stack([ci, cj], 1) * sz
-    lam, mu = E * NU / ((1 + NU) * (1 - 2 * NU)), E / (2 * (1 + NU))
-    Dm = np.array([[lam + 2 * mu, lam, 0], [lam, lam + 2 * mu, 0], [0, 0, mu]])
+    Dm = plane_strain_matrix(E, NU)
     gp, gw = np.polynomial.legendre.leggauss(3)
     Ke = np.zeros((len(el), 18, 18))
     for xa, wa in zip(gp, gw):
