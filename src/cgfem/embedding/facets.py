@@ -137,20 +137,53 @@ _FACE_EDGES = np.array([[_EDGE_OF[frozenset((int(f[k]), int(f[(k + 1) % 4])))] f
 MISORIENTED_COS = -0.5
 
 
+#: ``1 - cos`` below which a triangle lies in a crossing's face (flat: ~1e-16; chamfer: ~0.1)
+IN_PLANE = 1e-10
+
+
 @njit(cache=True)
-def _facet_kernel(cut, shape, node_inside, vkeys, vpos, fkeys, finside,
+def _triangle_patch(corners, loop, n_loop, vid, vpatch, vnormal, vote):
+    """Patch of the triangle ``corners`` (3, 3) cut from the loop ``vid[loop[:n_loop]]``:
+    that of a crossing of the loop in whose face's plane it lies (its unit normal within
+    ``IN_PLANE`` of the crossing's exact normal), else ``vote`` (the majority patch of its
+    own crossings). Outside a box's side just beyond a grid plane, fan triangles with two
+    crossings on the top lie in the side; chamfers and curved pieces keep the vote."""
+    mixed = False
+    for r in range(1, n_loop):
+        mixed = mixed or vpatch[vid[loop[r]]] != vpatch[vid[loop[0]]]
+    if not mixed:
+        return vote
+    a = corners[1] - corners[0]
+    b = corners[2] - corners[0]
+    n = np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+    size = np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+    if size == 0.0:
+        return vote
+    best = 1.0 - IN_PLANE
+    patch = vote
+    for r in range(n_loop):
+        v = vid[loop[r]]
+        score = (n[0] * vnormal[v, 0] + n[1] * vnormal[v, 1] + n[2] * vnormal[v, 2]) / size
+        if score > best:
+            best = score
+            patch = vpatch[v]
+    return patch
+
+
+@njit(cache=True)
+def _facet_kernel(cut, shape, node_inside, vkeys, vpos, vpatch, vnormal, fkeys, finside,
                   corners, edges, faces, face_lower, face_edges,
-                  tri, tri_vid, tri_elem, tri_loop, seg, seg_elem, seg_face, seg_fkey, counts):
+                  tri, tri_vid, tri_elem, tri_patch, seg, seg_elem, seg_face, seg_fkey, counts):
     """Marching-cubes loops and fan triangles of the ``cut`` elements (see module docstring).
 
     cut (n,) element ids; shape (3,) elements per axis; node_inside (n_nodes,);
     vkeys (nv,) sorted edge keys ``axis * n_nodes + lower node id`` of the crossings at
-    vpos (nv, 3); fkeys (nf,) sorted face keys ``axis * n_nodes + lowest node id`` of the
-    ambiguous faces with the centre status finside (nf,). Outputs (capacity 12 n): tri
-    (., 3, 3), tri_vid (., 3) crossing ids (-1: a centroid), tri_elem, tri_loop (the loop a
-    triangle is cut from, from 0); seg (., 2) crossing ids of the face segments (material on
-    the left seen from outside the element), seg_elem, seg_face (0..5), seg_fkey; counts =
-    [n_tri, n_seg, n_errors].
+    vpos (nv, 3) with vpatch (nv,) and exact vnormal (nv, 3); fkeys (nf,) sorted face keys
+    ``axis * n_nodes + lowest node id`` of the ambiguous faces with the centre status finside
+    (nf,). Outputs (capacity 12 n): tri (., 3, 3), tri_vid (., 3) crossing ids (-1: a
+    centroid), tri_elem, tri_patch (:func:`_triangle_patch`); seg (., 2) crossing ids of the
+    face segments (material on the left seen from outside the element), seg_elem, seg_face
+    (0..5), seg_fkey; counts = [n_tri, n_seg, n_errors].
     """
     ny1 = shape[1] + 1
     nz1 = shape[2] + 1
@@ -163,7 +196,6 @@ def _facet_kernel(cut, shape, node_inside, vkeys, vpos, fkeys, finside,
     loop = np.empty(12, np.int64)
     nt = 0
     ns = 0
-    n_loops = 0
     for e in range(cut.size):
         el = cut[e]
         i = el // (shape[1] * shape[2])
@@ -244,9 +276,10 @@ def _facet_kernel(cut, shape, node_inside, vkeys, vpos, fkeys, finside,
                     tri_vid[nt, r] = v
                     for d in range(3):
                         tri[nt, r, d] = vpos[v, d]
+                pa, pb, pc = vpatch[tri_vid[nt, 0]], vpatch[tri_vid[nt, 1]], vpatch[tri_vid[nt, 2]]
+                vote = pb if (pb == pc and pa != pb) else pa
+                tri_patch[nt] = _triangle_patch(tri[nt], loop, n_loop, vid, vpatch, vnormal, vote)
                 tri_elem[nt] = el
-                tri_loop[nt] = n_loops
-                n_loops += 1
                 nt += 1
                 continue
             centre = np.zeros(3)
@@ -263,10 +296,10 @@ def _facet_kernel(cut, shape, node_inside, vkeys, vpos, fkeys, finside,
                     tri[nt, 0, d] = centre[d]
                     tri[nt, 1, d] = vpos[va, d]
                     tri[nt, 2, d] = vpos[vb, d]
+                # two crossings: a tie unless equal, the first
+                tri_patch[nt] = _triangle_patch(tri[nt], loop, n_loop, vid, vpatch, vnormal, vpatch[va])
                 tri_elem[nt] = el
-                tri_loop[nt] = n_loops
                 nt += 1
-            n_loops += 1
     counts[0] = nt
     counts[1] = ns
 
@@ -503,42 +536,6 @@ def _ambiguous_faces(index: SurfaceIndex, grid: CartesianGrid, inside3: np.ndarr
     return keys[order], inside
 
 
-#: ``1 - cos`` below which a triangle lies in a crossing's face (flat: ~1e-16; chamfer: ~0.1)
-IN_PLANE = 1e-10
-
-
-def _triangle_patch(cross: np.ndarray, tri_vid: np.ndarray, tri_loop: np.ndarray,
-                    vpatch: np.ndarray, vnormal: np.ndarray) -> np.ndarray:
-    """Patch of each triangle (``cross`` (m, 3) its normal, any length; ``tri_vid`` (m, 3)
-    its crossings, -1 for a fan centre; ``tri_loop`` (m,) its loop, numbered from 0).
-
-    A triangle that lies in the plane of a crossing of its loop (its normal within
-    ``IN_PLANE`` of that crossing's exact normal) takes that crossing's patch: outside a
-    box's side just beyond a grid plane, fan triangles with two crossings on the top lie in
-    the side. Any other triangle (a chamfer across a seam, a curved surface) takes the
-    majority patch of its own crossings, ties to the first.
-    """
-    pa = vpatch[np.maximum(tri_vid[:, 0], 0)]
-    pb, pc = vpatch[tri_vid[:, 1]], vpatch[tri_vid[:, 2]]
-    fan = tri_vid[:, 0] < 0
-    patch = np.where(fan, pb, np.where((pb == pc) & (pa != pb), pb, pa))
-    unit = cross / np.maximum(np.linalg.norm(cross, axis=1), 1e-300)[:, None]
-    pairs = np.unique(np.column_stack([np.repeat(tri_loop, 3), tri_vid.ravel()]), axis=0)
-    pairs = pairs[pairs[:, 1] >= 0]
-    start = np.searchsorted(pairs[:, 0], np.arange(tri_loop.max(initial=-1) + 2))
-    width = int(np.diff(start).max(initial=0))
-    best = np.full(tri_loop.size, 1.0 - IN_PLANE)
-    for r in range(width):                        # the loop's r-th crossing, where it has one
-        at = start[tri_loop] + r
-        has = np.flatnonzero(at < start[tri_loop + 1])
-        v = pairs[at[has], 1]
-        score = np.einsum("ij,ij->i", unit[has], vnormal[v])
-        better = score > best[has]
-        best[has[better]] = score[better]
-        patch[has[better]] = vpatch[v[better]]
-    return patch
-
-
 def facet_embedding_parts(solid: Solid, grid: CartesianGrid, index: SurfaceIndex | None = None,
                           degree: int = DEFAULT_DEGREE, points: int = DEFAULT_POINTS) -> FacetBoundary:
     """The marching-cubes polyhedron of ``solid`` in ``grid`` with its surface rule of total
@@ -560,17 +557,17 @@ def facet_embedding_parts(solid: Solid, grid: CartesianGrid, index: SurfaceIndex
     cut = np.flatnonzero(status == CUT)
     cap = 12 * cut.size
     tri, tri_vid = np.empty((cap, 3, 3)), np.empty((cap, 3), np.int64)
-    tri_elem, tri_loop = np.empty(cap, np.int64), np.empty(cap, np.int64)
+    tri_elem, tri_patch = np.empty(cap, np.int64), np.empty(cap, np.int64)
     seg, seg_elem = np.empty((cap, 2), np.int64), np.empty(cap, np.int64)
     seg_face, seg_fkey = np.empty(cap, np.int64), np.empty(cap, np.int64)
     counts = np.zeros(3, np.int64)
-    _facet_kernel(cut, np.asarray(grid.shape, np.int64), node_inside, vkey, vx, fkeys, finside,
+    _facet_kernel(cut, np.asarray(grid.shape, np.int64), node_inside, vkey, vx, vpatch, vnormal, fkeys, finside,
                   _CORNERS, _EDGES, _FACES, _FACE_LOWER, _FACE_EDGES,
-                  tri, tri_vid, tri_elem, tri_loop, seg, seg_elem, seg_face, seg_fkey, counts)
+                  tri, tri_vid, tri_elem, tri_patch, seg, seg_elem, seg_face, seg_fkey, counts)
     if counts[2]:
         raise RuntimeError(f"marching cubes: {counts[2]} inconsistent edges, faces or loops")
     nt, ns = int(counts[0]), int(counts[1])
-    tri, tri_vid, tri_elem, tri_loop = tri[:nt], tri_vid[:nt], tri_elem[:nt], tri_loop[:nt]
+    tri, tri_vid, tri_elem, tri_patch = tri[:nt], tri_vid[:nt], tri_elem[:nt], tri_patch[:nt]
 
     # material interval of each cut element's z edge (x_{i+1}, y_{j+1}) on the polyhedron
     ijk = grid.element_ijk(cut)
@@ -589,7 +586,6 @@ def facet_embedding_parts(solid: Solid, grid: CartesianGrid, index: SurfaceIndex
         has = tri_vid[:, r] >= 0
         mean_normal[has] += vnormal[tri_vid[has, r]]
     cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    tri_patch = _triangle_patch(cross, tri_vid, tri_loop, vpatch, vnormal)
     twice_area = np.linalg.norm(cross, axis=1)
     size = twice_area * np.linalg.norm(mean_normal, axis=1)
     misoriented = int(np.sum((np.einsum("ij,ij->i", cross, mean_normal) < MISORIENTED_COS * size)
