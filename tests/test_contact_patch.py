@@ -79,7 +79,7 @@ def _solve(tmp_path, data: dict, surface: str):
     summary = json.loads((tmp_path / surface / "summary.json").read_text())
     n = len(summary["steps"])
     contact = meshio.read(tmp_path / surface / f"contact_{n:03d}.vtu")
-    return status, summary, contact.point_data
+    return status, summary, {**contact.point_data, "x": contact.points}
 
 
 @pytest.mark.parametrize("surface", ["nurbs_fe", "nurbs_fit"])
@@ -93,6 +93,11 @@ def test_small_strain_pressure_is_transmitted_exactly(tmp_path, surface):
     np.testing.assert_allclose(pts["pressure"][active], -p, rtol=1e-6)
     force = summary["steps"][-1]["contact"]["force"]
     np.testing.assert_allclose(force, [0.0, 0.0, -p], atol=1e-6 * p)
+    # the points' displacement is the homogeneous state's, at their reference positions on z = 1
+    X = pts["x"] - pts["displacement"]
+    np.testing.assert_allclose(X[:, 2], 1.0, atol=1e-12)
+    exact = (p / E) * X * np.array([NU, NU, -1.0])
+    np.testing.assert_allclose(pts["displacement"], exact, rtol=0, atol=1e-6 * p / E)
 
 
 def _uniaxial_cauchy(stretch: float) -> float:

@@ -5,7 +5,8 @@ Pa, negative in compression, 0 where inactive), ``p_N`` (the frozen stabilizing 
 ``active`` (0/1), ``normal`` (current unit slave normal), ``weight`` (area weight, m^2: the
 current area in finite strain, so ``sum pressure * weight * normal`` is the contact force on
 the slave when the surfaces are parallel), ``force`` (the exact point force on the slave, N,
-summing to the pair's contact force) and ``pair`` (index of the pair in the case's ``contact`` list). Points sit at
+summing to the pair's contact force), ``displacement`` (m, from the point's reference
+position: ParaView's Warp By Vector with factor -1 shows the reference configuration) and ``pair`` (index of the pair in the case's ``contact`` list). Points sit at
 their current positions.
 """
 
@@ -31,6 +32,7 @@ def contact_mesh(points: list[ContactPoints]) -> meshio.Mesh:
         "normal": np.concatenate([p.normal for p in points]) if points else np.zeros((0, 3)),
         "weight": np.concatenate([p.weight for p in points]) if points else np.zeros(0),
         "force": np.concatenate([p.point_force for p in points]) if points else np.zeros((0, 3)),
+        "displacement": np.concatenate([p.displacement for p in points]) if points else np.zeros((0, 3)),
         "pair": np.concatenate([np.full(p.x.shape[0], i, np.int32) for i, p in enumerate(points)])
         if points else np.zeros(0, np.int32),
     }

@@ -116,7 +116,8 @@ class ContactPoints:
     area weight, p_N (n,) the frozen stabilizing stress, point_force (n, 3) the force the
     master exerts on the slave at the point, ``-w lambda_N q`` with ``q = dg/dx1`` (the
     master normal scaled by ``1 / (n2 . n1)``): along ``pressure * weight * normal`` when the
-    surfaces are parallel, and exactly the force the residual applies in any case
+    surfaces are parallel, and exactly the force the residual applies in any case;
+    displacement (n, 3) ``x`` minus the point's reference position
     """
 
     x: np.ndarray
@@ -127,6 +128,7 @@ class ContactPoints:
     weight: np.ndarray
     p_N: np.ndarray
     point_force: np.ndarray
+    displacement: np.ndarray
 
     @property
     def force(self) -> np.ndarray:
@@ -358,7 +360,7 @@ class ContactPair:
                                       slot=_slots(hits, rows)).t
             force[rows] = -(w[rows] * lam[rows])[:, None] * gap_gradient_direction(t, st.n[rows])
         return ContactPoints(st.x, st.n, np.where(hits.found, hits.g, np.nan), lam, active, w,
-                             self.state.p_N.copy(), force)
+                             self.state.p_N.copy(), force, st.x - self.frames.X)
 
 
 def _largest_move(du: np.ndarray) -> float:
