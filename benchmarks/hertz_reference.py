@@ -32,8 +32,10 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
@@ -378,6 +380,20 @@ def richardson(q: list[float]) -> tuple[float, float, float]:
     return q[-1] + d2 / (2 ** p - 1), p, abs(d2 / (2 ** p - 1))
 
 
+def fitted_ellipse(x: Arr, p: Arr) -> tuple[float, float]:
+    """(p0, a) of the weighted least-squares ellipse the cgFEM tests fit to their contact
+    points (``tests/hertz_setup.fit_ellipse``), here over nodal pressures at x >= 0 sampled
+    linearly at 20001 even points and mirrored to x < 0."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from hertz_setup import fit_ellipse
+    xs = np.linspace(0.0, x.max(), 20001)
+    ps = np.interp(xs, x, p)
+    w = np.full(xs.size, xs[1] - xs[0])
+    w[-1] *= 0.5
+    X, P, W = np.r_[-xs[:0:-1], xs], np.r_[ps[:0:-1], ps], np.r_[w[:0:-1], w]
+    return fit_ellipse(X, P, W, 2.0 * math.sqrt(np.sum(W * P * X**2) / np.sum(W * P)))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     for name, val, hlp in (("--R", 1.0, "cylinder radius"), ("--delta", 0.05, "approach of the flat face"),
@@ -428,6 +444,9 @@ def main() -> None:
         for key, name in (("P", "P [N/m]"), ("ae", "a_edge/a_H"), ("af", "a_F/a_H"), ("am", "a_moment/a_H"),
                           ("pp", "p_max/p0_H"), ("a_F", "a_F [m]"), ("a_mom", "a_moment [m]"), ("pmax", "p_max [Pa]")):
             print("  {:13s} {:14.8g}   order {:5.2f}   {:.2g}".format(name, *richardson([r[key] for r in rows])))
+    p0_fit, a_fit = fitted_ellipse(rows[-1]["x"], rows[-1]["p"])
+    print(f"# the cgFEM tests' estimators on the finest profile (tests/hertz_setup.py): fitted ellipse "
+          f"p0 = {p0_fit:.1f} Pa, a = {a_fit:.6f} m; second moment a = {rows[-1]['a_mom']:.6f} m")
     if a.pressure_out:   # nodal pressures (mortar multipliers) of the finest level, current x
         r, (aH, p0H) = rows[-1], hertz(rows[-1]["P"], R, a.E_ratio)
         ph = p0H * np.sqrt(np.maximum(0, 1 - (r["x"] / aH) ** 2))
