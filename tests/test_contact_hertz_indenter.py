@@ -33,8 +33,13 @@ and its fitted peak 1.027 p0_H. Measured (relative errors, %):
 At level 2 both half-widths are within the finite geometry's 2.7 % of Hertz, and the closed
 form no longer tells them apart (the reference still does). nurbs_fe's numbers are the same
 to 0.1 % for four other offsets of the indenter's grid; facets' load at level 0 ranges from
--21 % to -55 % with them (a vertex or an edge of the chords lowest). Each level-1 run takes
-about 15 s.
+-21 % to -55 % with them (a vertex or an edge of the chords lowest). Against the reference
+nurbs_fe stays the closer on both measures at levels 0 and 1 with another offset of the
+block's grid (0.71, 0, 0.18) and with a deeper approach (0.045, a / R ~ 0.19; reference P
+330583 N/m, a 0.189339 m, p0 1110164 Pa). Against Hertz the deeper approach shows the floor:
+the reference's p0 is 3.7 % above Hertz's there, and at level 1 facets' p0 (-0.4 %) is
+closer to Hertz than nurbs_fe's (+3.4 %), which is 0.3 % from the reference. Each level-1
+run takes about 15 s.
 """
 
 from __future__ import annotations
