@@ -178,28 +178,32 @@ def gap_derivatives(frames: SlaveFrames, slave: SlaveState, master: MasterPoints
     if not second:
         return GapDerivatives(g, dg, np.zeros((n_pts, 0, 0)), w, dw)
     th = theta[:, :2]                                               # (n, 2, D)
+    th_t = th.transpose(0, 2, 1)
     qs = np.einsum("pk,pabk->pab", q, master.s)
-    d2g = np.einsum("pab,pai,pbj->pij", qs, th, th)
+    d2g = th_t @ (qs @ th)                                          # th_ai qs_ab th_bj
     # q . dt_alpha/dv_j: only on U2 dofs, psi_alpha[a] q_k
     qt = np.zeros((n_pts, 2, d))
     qt[:, :, s1:] = np.einsum("pca,pk->pcak", master.psi, q).reshape(n_pts, 2, s2)
-    cross = np.einsum("pai,paj->pij", th, qt)
+    cross = th_t @ qt
     d2g += cross + cross.transpose(0, 2, 1)
     qdn = np.zeros((n_pts, d))
     qdn[:, :s1] = np.einsum("pk,pik->pi", q, dn)
     outer = dg[:, :, None] * qdn[:, None, :]
     d2g -= outer + outer.transpose(0, 2, 1)
-    # - g q . n_ij on the slave block (second derivative of the normal)
+    # - g q . n_ij on the slave block (second derivative of the normal). m_ij = d2m/dU1_i dU1_j
+    # is c_ac (e_k x e_l) with c_ac = ca_a cb_c - cb_a ca_c, i = (a, k), j = (c, l); it enters
+    # only as v . m_ij with v = q / r - (q . m) m / r^3, so it is never formed
     c = frames.ca[:, :, None] * frames.cb[:, None, :]
     c = c - c.transpose(0, 2, 1)                                    # (n, A, A)
-    d2m = np.einsum("pac,klv->pakclv", c, _CROSS).reshape(n_pts, s1, s1, 3)
     qm = np.einsum("pk,pk->p", q, m)
     q_dm = np.einsum("pk,pik->pi", q, dm)
     r3 = r ** 3
-    qn2 = (np.einsum("pk,pijk->pij", q, d2m) / r[:, None, None]
+    v = q / r[:, None] - (qm / r3)[:, None] * m
+    v_cross = np.einsum("klv,pv->pkl", _CROSS, v)                  # v . (e_k x e_l)
+    v_d2m = (c[:, :, None, :, None] * v_cross[:, None, :, None, :]).reshape(n_pts, s1, s1)
+    qn2 = (v_d2m
            - (q_dm[:, :, None] * m_dm[:, None, :] + m_dm[:, :, None] * q_dm[:, None, :]) / r3[:, None, None]
-           - qm[:, None, None] * (np.einsum("pik,pjk->pij", dm, dm)
-                                  + np.einsum("pk,pijk->pij", m, d2m)) / r3[:, None, None]
+           - qm[:, None, None] * (dm @ dm.transpose(0, 2, 1)) / r3[:, None, None]
            + 3.0 * (qm / r ** 5)[:, None, None] * m_dm[:, :, None] * m_dm[:, None, :])
     d2g[:, :s1, :s1] -= g[:, None, None] * qn2
     return GapDerivatives(g, dg, -d2g, w, dw)
