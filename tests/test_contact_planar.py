@@ -21,7 +21,7 @@ RESULTANT = 2.0 * 1e12 * 0.01 ** 3 / 6.0 * 0.0025
 
 
 @pytest.mark.parametrize("surface", ["nurbs_fe", "facets"])
-@pytest.mark.parametrize("level", [0, 1])
+@pytest.mark.parametrize("level", [0, 1, 2])
 def test_contact_force_balances_the_tractions(tmp_path, surface, level):
     case = load_case(CASE)
     status = run_case(case, level, surface, tmp_path)
