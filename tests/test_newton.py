@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cgfem.solve.newton import NONMONOTONE, newton, observed_order
+from cgfem.solve.newton import NONMONOTONE, newton, observed_order, window_orders
 
 
 def _scalar(r, dr):
@@ -24,6 +24,19 @@ def test_full_steps_converge_quadratically():
                  tol=1e-14, reference=1.0, max_iter=20)
     assert res.converged and abs(res.u[0] ** 3 + res.u[0] - 3.0) <= 1e-14
     assert observed_order(res.residuals, floor=1e-15) > 1.8
+
+
+def test_window_orders_tell_a_quadratic_end_from_a_linear_one():
+    """chain2_steel level 0, nurbs_fe, step 1 (relative residuals; the last is round-off):
+    the last two windows read 1.16 and 2.81, quadratic with a constant that changed; a
+    tangent off by 1e-3 (r+ = 1e-3 r from some point on) reads 1 in both."""
+    quadratic = [1.0, 2.8e-3, 2.1e-5, 7.1e-8, 8.1e-15]
+    assert window_orders(quadratic) == pytest.approx([1.163, 2.81], abs=5e-3)
+    # the one window above round-off reads low
+    assert observed_order(quadratic, floor=1e-11) == pytest.approx(1.163, abs=5e-3)
+    linear = [1.0, 1e-2] + [1e-2 * 1e-3 ** k for k in range(1, 4)]
+    assert window_orders(linear, floor=1e-13) == pytest.approx([1.0, 1.0], abs=1e-9)
+    assert window_orders([1.0, 1e-13, 1e-16]) == []     # the second residual at round-off
 
 
 def test_line_search_tames_arctan():

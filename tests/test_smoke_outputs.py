@@ -26,6 +26,7 @@ import pytest
 import yaml
 
 from cgfem.report.runs import CONTACT_FIELDS, CONTACT_FORCE, PRESSURE, Run
+from cgfem.solve.newton import window_orders
 
 REPO = Path(__file__).resolve().parents[1]
 #: every figure of rule ``all`` (workflow/rules/common.smk FIGURES)
@@ -179,21 +180,12 @@ def test_chain2_links_are_in_equilibrium(runs):
             assert np.abs(pulled + run.contact_force(k)).max() <= CHAIN2_BALANCE * scale, (run.folder, k)
 
 
-def last_orders(residuals: list[float], floor: float = 1e-11) -> list[float]:
-    """The three-point orders ``log(r3/r2) / log(r2/r1)`` of the last two windows whose first
-    two residuals are above ``floor`` times the first residual. The third may be round-off: a
-    residual at round-off is no smaller than the true one, so its window can only read low."""
-    r = [float(x) for x in residuals]
-    above = [k for k in range(1, len(r) - 1) if min(r[k - 1], r[k]) > floor * r[0]]
-    return [math.log(r[k + 1] / r[k]) / math.log(r[k] / r[k - 1]) for k in above[-2:]]
-
-
 def test_chain2_steel_newton_ends_quadratically(runs):
     """chain2_steel with facets and nurbs_fe, every level the results hold: the first Newton
     solve of every step (full Newton; later passes start from the kept factorization) ends
     quadratically, read from the residuals of the summary: one of its last two three-point
-    windows (:func:`last_orders`) reads >= 1.8. A linearly converging end (a tangent off by
-    1e-3: ``r+ ~ 1e-3 r``) reads about 1 in both and fails.
+    windows (:func:`cgfem.solve.newton.window_orders`) reads >= 1.8. A linearly converging
+    end (a tangent off by 1e-3: ``r+ ~ 1e-3 r``) reads about 1 in both and fails.
 
     One window is not enough: the residual's constant ``r+/r^2`` depends on the direction of
     the remaining error (the penalty beside nearly free sliding), and a single window swings
@@ -207,7 +199,7 @@ def test_chain2_steel_newton_ends_quadratically(runs):
     steel = [r for r in runs if r.case == "chain2_steel" and r.n_steps > 0 and r.surface != "nurbs_fit"]
     assert steel, "no chain2_steel runs"
     for run in steel:
-        orders = [last_orders(step["pass_residuals"][0]) for step in run.steps]
+        orders = [window_orders(step["pass_residuals"][0]) for step in run.steps]
         measured = [max(q) for q in orders if q]
         assert measured, f"{run.folder}: no step with two residuals above round-off"
         assert min(measured) >= 1.8, f"{run.folder}: last two orders per step {orders}"

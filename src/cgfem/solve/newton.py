@@ -152,3 +152,15 @@ def observed_order(residuals: list[float], floor: float = 1e-13) -> float:
         return float("nan")
     r1, r2, r3 = r[-3:]
     return float(np.log(r3 / r2) / np.log(r2 / r1))
+
+
+def window_orders(residuals: list[float], floor: float = 1e-11, count: int = 2) -> list[float]:
+    """The three-point orders ``log(r3/r2) / log(r2/r1)`` of the last ``count`` windows whose
+    first two residuals are above ``floor`` times the first residual. Unlike
+    :func:`observed_order` the third may be round-off: a residual at round-off is no smaller
+    than the true one, so its window can only read low. The better of the last two tells a
+    quadratic end whose constant ``r+/r^2`` changes between iterations (it depends on the
+    direction of the remaining error) from a linear one, which reads about 1 in both."""
+    r = [float(x) for x in residuals]
+    above = [k for k in range(1, len(r) - 1) if min(r[k - 1], r[k]) > floor * r[0]]
+    return [float(np.log(r[k + 1] / r[k]) / np.log(r[k] / r[k - 1])) for k in above[-count:]]
