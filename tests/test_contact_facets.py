@@ -71,6 +71,21 @@ def test_search_equals_brute_force(scene):
     np.testing.assert_allclose(got.g[ref.found], ref.g[ref.found], atol=1e-12)
 
 
+def test_triangles_facing_the_ray_are_no_hits(scene):
+    """Points 0.1 inside the sphere whose normals point out: the ray meets the near triangles
+    at g ~ 0.1, but their normals go the ray's way (not opposing the slave's), so there is no
+    admissible hit within MAX_GAP; with the normals turned in, every ray hits at g ~ -0.1."""
+    surface, u, verts = scene
+    x1, n1 = _rays(150, 1)
+    d = -n1
+    x1 = d * 0.9
+    out = surface.search(u, x1, d, MAX_GAP)
+    assert not out.found.any() and not _reference(verts, x1, d).found.any()
+    inward = surface.search(u, x1, -d, MAX_GAP)
+    assert inward.found.all()
+    np.testing.assert_allclose(inward.g, -0.1, atol=0.04)   # chords and the random field: 0.025
+
+
 @pytest.mark.parametrize("past, kept", [(0.5 * STICKY, True), (2.0 * STICKY, False)])
 def test_previous_triangle_is_kept_within_the_band(scene, past, kept):
     """Rays perpendicular to a triangle, through its plane ``past`` beyond one of its edges

@@ -32,6 +32,7 @@ import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
+from cgfem.contact._facet_kernels import triangle_hits
 from cgfem.contact import _ray_kernels as _rk
 from cgfem.contact.kinematics import MasterPoints, SlaveFrames
 from cgfem.embedding.partition import SurfaceQuadrature
@@ -529,20 +530,16 @@ class FacetSurface:
               band: float | np.ndarray, max_gap: float
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Admissible hits of the pairs (ray ``rows[k]``, triangle ``tris[k]`` of ``verts``):
-        barycentric coordinates within ``band`` (a number, or one per pair) of the triangle, normal against the ray,
-        ``|g| <= max_gap``. Returns the pairs that hit: their rays, triangles, ``l1``, ``l2``
-        and ``g``."""
-        v = verts[tris]
-        e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
-        J = np.stack([e1, e2, -n1[rows]], axis=2)
-        good = np.abs(np.linalg.det(J)) > 1e-30 * self.h ** 2
-        sol = np.full((rows.size, 3), np.nan)
-        sol[good] = np.linalg.solve(J[good], (x1[rows] - v[:, 0])[good][..., None])[..., 0]
-        l1, l2, g = sol[:, 0], sol[:, 1], sol[:, 2]
-        inside = good & (l1 >= -band) & (l2 >= -band) & (l1 + l2 <= 1.0 + band)
-        inside &= (np.einsum("pk,pk->p", np.cross(e1, e2), n1[rows]) < 0.0) & (np.abs(g) <= max_gap)
-        k = np.flatnonzero(inside)
-        return rows[k], tris[k], l1[k], l2[k], g[k]
+        barycentric coordinates within ``band`` (a number, or one per pair) of the triangle,
+        normal against the ray, ``|g| <= max_gap``
+        (:func:`cgfem.contact._facet_kernels.triangle_hits`). Returns the pairs that hit:
+        their rays, triangles, ``l1``, ``l2`` and ``g``."""
+        rows, tris = np.ascontiguousarray(rows, np.int64), np.ascontiguousarray(tris, np.int64)
+        bands = np.ascontiguousarray(np.broadcast_to(np.asarray(band, float), rows.shape))
+        hit, sol = triangle_hits(np.ascontiguousarray(x1, float), np.ascontiguousarray(n1, float), rows, tris,
+                                 np.ascontiguousarray(verts, float), bands, float(max_gap), 1e-30 * self.h ** 2)
+        k = np.flatnonzero(hit)
+        return rows[k], tris[k], sol[k, 0], sol[k, 1], sol[k, 2]
 
     def _take(self, best: RayHits, cand: np.ndarray, rows: np.ndarray, tris: np.ndarray, l1: np.ndarray,
               l2: np.ndarray, g: np.ndarray, nearest: bool) -> None:
