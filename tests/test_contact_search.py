@@ -119,6 +119,21 @@ def test_search_equals_reference(scene):
     assert np.all(np.einsum("pk,pk->p", mp.normal, n1[fast.found]) < 0.0)
 
 
+def test_master_facing_the_ray_is_no_hit(scene):
+    """Points 0.1 inside the master sphere whose normals point out: the ray meets the surface
+    at g ~ 0.1, but its normal goes the ray's way (not opposing the slave's), so there is no
+    admissible hit within MAX_GAP; with the normals turned in, every ray hits at g ~ -0.1."""
+    surface, _, _, u = scene
+    rng = np.random.default_rng(7)
+    d = rng.standard_normal((100, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    x1 = 0.9 * d
+    assert not surface.search(u, x1, d, MAX_GAP).found.any()
+    inward = surface.search(u, x1, -d, MAX_GAP)
+    assert inward.found.all()
+    np.testing.assert_allclose(inward.g, -0.1, atol=0.045)    # the random field (0.02 per dof): 0.030
+
+
 def test_search_from_previous_pairing_equals_reference(scene):
     """From a previous pairing whose master elements are not recorded (``slot=None``), the
     search equals the reference point by point."""
