@@ -86,6 +86,29 @@ def test_triangles_facing_the_ray_are_no_hits(scene):
     np.testing.assert_allclose(inward.g, -0.1, atol=0.04)   # chords and the random field: 0.025
 
 
+def test_ray_near_an_edge_hits_its_own_triangle(scene):
+    """Rays along the inward normal of a triangle through a point 1e-4 (barycentric) inside
+    each of its edges hit that triangle, at the constructed point: a neighbour's plane
+    extended past the shared edge lies just above it on a convex surface and would be the
+    nearer hit if hits were admitted a little outside a triangle."""
+    surface, u, verts = scene
+    rng = np.random.default_rng(5)
+    tris = rng.choice(len(verts), 60, replace=False)
+    near_edge = np.array([[0.5, 0.5 - 1e-4], [1e-4, 0.5], [0.5, 1e-4]])   # l1 + l2 = 1, l1 = 0, l2 = 0
+    t = np.repeat(tris, 3)
+    theta = np.tile(near_edge, (tris.size, 1))
+    v = verts[t]
+    e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
+    point = v[:, 0] + theta[:, :1] * e1 + theta[:, 1:] * e2
+    m = np.cross(e1, e2)
+    m /= np.linalg.norm(m, axis=1)[:, None]
+    hits = surface.search(u, point + 0.05 * m, -m, MAX_GAP)
+    assert hits.found.all()
+    np.testing.assert_array_equal(hits.piece, t)
+    np.testing.assert_allclose(hits.theta, theta, atol=1e-9)
+    np.testing.assert_allclose(hits.g, 0.05, atol=1e-12)
+
+
 @pytest.mark.parametrize("past, kept", [(0.5 * STICKY, True), (2.0 * STICKY, False)])
 def test_previous_triangle_is_kept_within_the_band(scene, past, kept):
     """Rays perpendicular to a triangle, through its plane ``past`` beyond one of its edges
