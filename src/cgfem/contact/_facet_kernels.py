@@ -20,12 +20,14 @@ def triangle_hits(x1, n1, rows, tris, verts, band, max_gap, det_tol):
     """Admissible hits of the pairs (ray ``rows[k]``, triangle ``tris[k]``).
 
     ``x1``, ``n1`` (n, 3) ray origins and unit directions; ``verts`` (m, 3, 3) current
-    triangle vertices; ``band`` (n_pairs,) how far outside the triangle (barycentric) a hit
-    still counts; ``det_tol``: smallest ``|det [e1, e2, -n1]|`` of a solvable pair. A pair hits
-    when it is solvable, ``l1, l2 >= -band``, ``l1 + l2 <= 1 + band``, the triangle's normal
-    ``e1 x e2`` is against ``n1`` and ``|g| <= max_gap``. Returns ``hit`` (n_pairs,) bool and
+    triangle vertices; ``band`` how far outside the triangle (barycentric) a hit still counts:
+    (n_pairs,) one per pair, or (1,) the same for all; ``det_tol`` > 0. A pair hits when the
+    triangle's normal ``e1 x e2`` is against ``n1`` by more than ``det_tol`` (that is also
+    ``det [e1, e2, -n1] = -(e1 x e2) . n1``, so the system is solvable), ``l1, l2 >= -band``,
+    ``l1 + l2 <= 1 + band`` and ``|g| <= max_gap``. Returns ``hit`` (n_pairs,) bool and
     ``sol`` (n_pairs, 3): ``(l1, l2, g)`` where ``hit``."""
     n_pairs = rows.size
+    per_pair = band.size == n_pairs
     hit = np.zeros(n_pairs, np.bool_)
     sol = np.zeros((n_pairs, 3))
     J = np.empty((3, 3))
@@ -40,12 +42,9 @@ def triangle_hits(x1, n1, rows, tris, verts, band, max_gap, det_tol):
         bx = verts[t, 2, 0] - verts[t, 0, 0]
         by = verts[t, 2, 1] - verts[t, 0, 1]
         bz = verts[t, 2, 2] - verts[t, 0, 2]
-        # e1 x e2 against the ray: a triangle facing away is no hit whatever the solve gives
-        mx, my, mz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
-        if mx * nx + my * ny + mz * nz >= 0.0:
-            continue
-        # det [e1, e2, -n1] = -(e1 x e2) . n1
-        if not abs(mx * nx + my * ny + mz * nz) > det_tol:
+        # a triangle facing the ray's way (or edge-on) is no hit whatever the solve would give
+        facing = (ay * bz - az * by) * nx + (az * bx - ax * bz) * ny + (ax * by - ay * bx) * nz
+        if not -facing > det_tol:
             continue
         J[0, 0], J[1, 0], J[2, 0] = ax, ay, az
         J[0, 1], J[1, 1], J[2, 1] = bx, by, bz
@@ -55,7 +54,7 @@ def triangle_hits(x1, n1, rows, tris, verts, band, max_gap, det_tol):
         if not solve3(J, F, step):
             continue
         l1, l2, g = step[0], step[1], step[2]
-        b = band[k]
+        b = band[k] if per_pair else band[0]
         if l1 >= -b and l2 >= -b and l1 + l2 <= 1.0 + b and abs(g) <= max_gap:
             hit[k] = True
             sol[k, 0], sol[k, 1], sol[k, 2] = l1, l2, g

@@ -32,8 +32,8 @@ import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
-from cgfem.contact._facet_kernels import triangle_hits
 from cgfem.contact import _ray_kernels as _rk
+from cgfem.contact._facet_kernels import triangle_hits
 from cgfem.contact.kinematics import MasterPoints, SlaveFrames
 from cgfem.embedding.partition import SurfaceQuadrature
 from cgfem.fem.space import LOCATE_TOL, NODE_XI, Space, shape_functions
@@ -535,7 +535,7 @@ class FacetSurface:
         (:func:`cgfem.contact._facet_kernels.triangle_hits`). Returns the pairs that hit:
         their rays, triangles, ``l1``, ``l2`` and ``g``."""
         rows, tris = np.ascontiguousarray(rows, np.int64), np.ascontiguousarray(tris, np.int64)
-        bands = np.ascontiguousarray(np.broadcast_to(np.asarray(band, float), rows.shape))
+        bands = np.ascontiguousarray(np.atleast_1d(np.asarray(band, float)))      # (1,) or one per pair
         hit, sol = triangle_hits(np.ascontiguousarray(x1, float), np.ascontiguousarray(n1, float), rows, tris,
                                  np.ascontiguousarray(verts, float), bands, float(max_gap), 1e-30 * self.h ** 2)
         k = np.flatnonzero(hit)
