@@ -1,12 +1,10 @@
 """Compile (and cache) the numba kernels before a batch of runs: ``cgfem warmup``.
 
 Every kernel is compiled with ``cache=True``, so a process that finds the cache loads it in
-well under a second; a process that does not compiles every kernel it calls, 2-4 min in all.
-Jobs started together on a fresh install (many jobs of a cluster) each compile the kernels
-they call at the same time. Running :func:`warm_up` once first (204 s from a cold cache, one
-thread) leaves the cache complete for all of them. The pipeline does not: on two cores it did
-not make the smoke run faster (clean clones, cold cache: 5 min 4 s with it, 3 min 36 s and
-4 min 48 s without).
+well under a second; a process that does not compiles every kernel it calls, a few minutes in
+all. Jobs started together on a fresh install (many jobs of a cluster) each compile the
+kernels they call at the same time; running :func:`warm_up` once first leaves the cache
+complete for all of them (timings: docs/performance.md).
 
 It solves two small contact problems, on the coarsest grids, with each surface definition:
 two half-torus links pulled apart by 0.1 mm (Neo-Hookean, finite strain; rational NURBS
@@ -19,10 +17,11 @@ Each run must converge; the results are thrown away.
 
 from __future__ import annotations
 
+import json
 import tempfile
 import time
 from pathlib import Path
-from typing import Callable
+from typing import Callable, NamedTuple
 
 from cgfem.case.load import parse_case
 from cgfem.case.model import SURFACES
@@ -76,10 +75,32 @@ def _blocks() -> dict:
                      "slave_patches": ["zmax"], "master_patches": ["zmin"]}]}
 
 
-def warm_up(log: Callable[[str], None] | None = None) -> list[tuple[str, str, str, float]]:
-    """Solve the two problems with every surface definition in a temporary folder; returns
-    ``(problem, surface, status, seconds)`` per run. Raises ``RuntimeError`` if one does not
-    converge (a broken install: the kernels were compiled, the solver is not right)."""
+class WarmupRun(NamedTuple):
+    """One warm-up run: the problem's name, the surface definition, the run's status, its
+    wall time (s) and the contact force (3,) of the masters on the slaves at its last step
+    (N)."""
+
+    problem: str
+    surface: str
+    status: str
+    seconds: float
+    contact_force: tuple[float, float, float]
+
+
+def warm_up(log: Callable[[str], None] | None = None) -> list[WarmupRun]:
+    """Solve the two problems with every surface definition in a temporary folder.
+
+    Returns
+    -------
+    list of WarmupRun
+        One per run, links first, definitions in :data:`SURFACE_DEFINITIONS` order.
+
+    Raises
+    ------
+    RuntimeError
+        If a run does not converge (a broken install: the kernels were compiled, the
+        solver is not right).
+    """
     log = log or (lambda message: None)
     done = []
     with tempfile.TemporaryDirectory(prefix="cgfem-warmup-") as tmp:
@@ -90,7 +111,9 @@ def warm_up(log: Callable[[str], None] | None = None) -> list[tuple[str, str, st
                 status = run_case(case, 0, surface, Path(tmp) / f"{case.name}_{surface}")
                 seconds = time.perf_counter() - tic
                 log(f"{case.name} with {surface}: {status.status} ({seconds:.1f} s)")
-                done.append((case.name, surface, status.status, seconds))
+                steps = json.loads(status.summary.read_text())["steps"]
+                force = tuple(steps[-1]["contact"]["force"]) if steps else (0.0, 0.0, 0.0)
+                done.append(WarmupRun(case.name, surface, status.status, seconds, force))
                 if status.status != CONVERGED:
                     raise RuntimeError(f"warm-up run {case.name} with {surface} ended {status.status}: "
                                        f"{status.message}")

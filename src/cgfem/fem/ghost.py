@@ -14,7 +14,7 @@ this one term ties a sliver's nodes to the well-supported element next to it. It
 for every linear displacement field (the patch test stays exact) and of order ``h`` for a
 smooth solution, so the optimal rate in the energy norm is kept. The term is linear in ``u``
 and is also used, unchanged, in finite strain (it acts on the displacement field, not on
-the stress). Effect measured in ``tests/test_ghost.py`` and in the issue note.
+the stress). Effect measured in ``tests/physics/test_ghost.py`` and in the issue note.
 
 On a uniform grid the face matrix is one (16, 16) scalar matrix per axis, computed once.
 """

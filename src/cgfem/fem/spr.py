@@ -20,7 +20,7 @@ Nodal values. ZZ's original averaging: ``sigma*_a`` is the mean, over the nodes 
 share an element with ``a`` (``a`` included), of ``b``'s patch polynomial at ``x_a``. At
 boundary nodes this blends one-sided extrapolations with the fits of interior neighbours.
 
-Measured (tests/test_spr.py setting: interpolant of a smooth field on a unit sphere, grid
+Measured (tests/physics/test_spr.py setting: interpolant of a smooth field on a unit sphere, grid
 offsets (0.13, 0.29, 0.41), h = 0.4 ... 0.05), error ``||sigma - sigma*||_L2`` at h = 0.05,
 observed order over the four levels and ZZ effectivity at h = 0.1 / 0.05:
 

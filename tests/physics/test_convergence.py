@@ -7,7 +7,11 @@ import pytest
 
 from cgfem.geometry.builders import build_solid
 from cgfem.geometry.specs import SphereSpec, TorusSpec
-from manufactured import CubicField, solve_manufactured
+from tests.support.manufactured import CubicField, solve_manufactured
+
+#: every test here solves a whole problem
+pytestmark = pytest.mark.slow
+
 
 OFFSET = (0.13, 0.29, 0.41)
 AXIS = tuple(np.array([0.3, 0.5, 0.8]) / np.linalg.norm([0.3, 0.5, 0.8]))

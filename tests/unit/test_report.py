@@ -7,7 +7,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import matplotlib.colors
 import meshio
 import numpy as np
 import pytest
@@ -24,8 +23,8 @@ from cgfem.report.energy import TOTAL, ErrorRow, energy_errors, read_error_table
 from cgfem.report.runs import Run, load_runs
 from cgfem.report.style import save_figure
 from cgfem.run import embed_body
+from tests.support.paths import REPO
 
-REPO = Path(__file__).resolve().parents[1]
 PULLED, CLAMPED = "link_b/cap_a+cap_b", "link_a/cap_a+cap_b"
 HEX = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
 

@@ -60,6 +60,7 @@ def _split_check(system: System, singles: list[System], u: np.ndarray, t: float,
     return r, K
 
 
+@pytest.mark.slow
 def test_small_strain_pair_is_two_independent_bodies(small_pair):
     case, (box, ball) = small_pair
     system, singles = System([box, ball]), [System([box]), System([ball])]

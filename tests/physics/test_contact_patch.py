@@ -44,6 +44,10 @@ E, NU = 1.0e7, 0.3
 
 #: the upper box's grid in the first tests (the lower one's x and y planes) and on fully
 #: non-matching grids (other h0, other offsets along every axis)
+#: every test here solves a whole problem
+pytestmark = pytest.mark.slow
+
+
 MATCHING = {"h0": 0.3, "offset": [0.13, 0.29, 0.57]}
 NON_MATCHING = {"h0": 0.23, "offset": [0.61, 0.77, 0.57]}
 

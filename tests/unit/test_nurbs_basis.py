@@ -13,7 +13,7 @@ import pytest
 from cgfem.errors import InputError
 from cgfem.geometry import _nurbs_kernels as K
 from cgfem.geometry.nurbs import NurbsSurface
-from nurbs_helpers import geomdl_surface
+from tests.support.nurbs_helpers import geomdl_surface
 
 
 # ----------------------------------------------------------------------------------------

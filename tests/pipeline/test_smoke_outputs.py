@@ -2,7 +2,7 @@
 
 Run after ``snakemake --cores 2 --configfile config/smoke.yaml``::
 
-    CGFEM_SMOKE_RESULTS=results python3 -m pytest -q tests/test_smoke_outputs.py
+    CGFEM_SMOKE_RESULTS=results python3 -m pytest -q tests/pipeline/test_smoke_outputs.py
 
 ``CGFEM_SMOKE_RESULTS`` is the pipeline's ``results/`` folder; the figures are looked up in
 ``CGFEM_SMOKE_FIGURES_DIR`` (default: ``paper_figures/`` next to that folder). For a run of part
@@ -27,8 +27,8 @@ import yaml
 
 from cgfem.report.runs import CONTACT_FIELDS, CONTACT_FORCE, PRESSURE, Run
 from cgfem.solve.newton import window_orders
+from tests.support.paths import REPO
 
-REPO = Path(__file__).resolve().parents[1]
 #: every figure of rule ``all`` (workflow/rules/common.smk FIGURES)
 FIGURES = ["fig09", "fig10", "fig13", "fig14", "fig15", "fig17", "newton", "timings", "geometry"]
 STATUSES = {"converged", "outer_not_converged", "failed"}
@@ -192,9 +192,9 @@ def test_chain2_steel_newton_ends_quadratically(runs):
     from 0.97 to 58 in the full run of 2026-11-25 (facets, nurbs_fe: the better of the last two
     is >= 1.91 in every step at levels 0-2). Level 0, nurbs_fe, step 1 with the contact-onset
     limit: residuals 2.8e-3, 2.1e-5, 7.1e-8, 8.1e-15 of the first read 1.16 and 2.81, while
-    Newton's map there is quadratic along the way it came (tests/test_contact_chain.py
+    Newton's map there is quadratic along the way it came (tests/physics/test_contact_chain.py
     measures it on the error). Not asserted for nurbs_fit: its tangent equals the finite
-    differences of its residual (tests/test_contact_fitted.py), but its windows read 0.38-3.37
+    differences of its residual (tests/physics/test_contact_fitted.py), but its windows read 0.38-3.37
     (the better of two >= 1.80)."""
     steel = [r for r in runs if r.case == "chain2_steel" and r.n_steps > 0 and r.surface != "nurbs_fit"]
     assert steel, "no chain2_steel runs"

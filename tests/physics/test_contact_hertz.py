@@ -2,7 +2,7 @@
 cylinder on a block of the same material, both on grids of the same size (h0 = 0.2, a / h ~ 1
 at level 0), kappa = 10 as in the paper's examples, the slab's y faces between grid planes.
 The setup, the estimators and the closed form are described in ``tests/hertz_setup.py``;
-``tests/test_contact_hertz_indenter.py`` is the setup in which the contact surface
+``tests/physics/test_contact_hertz_indenter.py`` is the setup in which the contact surface
 definitions are compared on the half-width and the peak pressure.
 
 Here the discretization error of the bulk (the coarse trilinear cylinder is too stiff, which
@@ -15,10 +15,13 @@ and its largest value. nurbs_fe's load at the imposed approach converges to the 
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
-from hertz_setup import EQUAL, R, SURFACES, HertzResult, assert_force_balance, solve_all
+from tests.support.hertz_setup import EQUAL, R, SURFACES, HertzResult, assert_force_balance, solve_all
+
+#: every test here solves a whole problem
+pytestmark = pytest.mark.slow
+
 
 LEVELS = (0, 1)
 

@@ -17,7 +17,7 @@ from cgfem.run import build_models
 from cgfem.solve.linear import rigid_body_modes
 from cgfem.solve.newton import observed_order
 from cgfem.solve.static import System, solve_static
-from elasticity_cases import box_case, uniform_stress_case
+from tests.support.elasticity_cases import box_case, uniform_stress_case
 
 
 def _solve(case, level=0, surface="nurbs_fe"):
@@ -85,6 +85,7 @@ def test_stiffness_energy_of_linear_fields_is_exact_on_cut_sphere():
     assert np.abs(model.ghost @ u).max() < 1e-12 * np.abs(r).max()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1])
 def test_patch_test_reproduces_uniform_stress(seed):
     rng = np.random.default_rng(seed)
@@ -133,6 +134,7 @@ def test_neo_hookean_tangent_matches_finite_differences():
     assert abs(K - K.T).max() < 1e-10 * abs(K).max()
 
 
+@pytest.mark.slow
 def test_uniaxial_stretch_matches_closed_form_and_newton_is_quadratic():
     E, nu, stretch = 1.0e6, 0.3, 1.5
     case = _neo_hookean_box([
@@ -157,6 +159,7 @@ def test_uniaxial_stretch_matches_closed_form_and_newton_is_quadratic():
     assert observed_order(first) >= 1.8
 
 
+@pytest.mark.slow
 def test_rigid_rotation_imposed_weakly_is_stress_free():
     E = 1.0e6
     # u = (R - I) x for a 90 degree rotation about z through the origin
@@ -171,6 +174,7 @@ def test_rigid_rotation_imposed_weakly_is_stress_free():
     assert np.abs(step.recovered[0]).max() < 1e-8 * E
 
 
+@pytest.mark.slow
 def test_reactions_balance_body_force_and_tractions_exactly():
     """Translation invariance of the bulk and ghost terms: the support reaction equals minus
     the resultant of the dead loads, whatever the recovered stress."""
@@ -193,7 +197,7 @@ def test_reactions_balance_body_force_and_tractions_exactly():
 
 def test_reference_matrix_equals_the_independent_voigt_brick():
     """Our tensor-form element kernel against the Voigt B^T D B brick of the solver fixture."""
-    import elasticity_fixture as fx
+    from tests.support import elasticity_fixture as fx
     from cgfem.fem._material_kernels import LINEAR_ELASTIC, tangent_batch
 
     E, nu, h = 2.5, 0.27, 0.4

@@ -13,7 +13,7 @@ import pytest
 
 from cgfem.fem.ghost import face_matrix, face_pairs
 from cgfem.run import build_models
-from elasticity_cases import box_case
+from tests.support.elasticity_cases import box_case
 
 
 def _stiffness(delta: float, gamma: float):

@@ -16,8 +16,8 @@ from cgfem.errors import InputError
 from cgfem.geometry.builders import build_solid
 from cgfem.geometry.io import solid_to_dict, write_solid
 from cgfem.geometry.specs import BoxSpec
+from tests.support.paths import CASES
 
-CASES = Path(__file__).resolve().parents[1] / "config" / "cases"
 
 GOOD = """\
 name: t
@@ -194,6 +194,7 @@ def test_refused_run_leaves_no_folder(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["case.yaml"]
 
 
+@pytest.mark.slow
 def test_bad_input_after_the_folder_was_made_removes_it(tmp_path, capsys, monkeypatch):
     """Bad input found once the run started (here raised by the solver) removes the folders
     the run created, and only those: a folder that held a file before is kept."""

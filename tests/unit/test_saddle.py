@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-import elasticity_fixture as fx
+from tests.support import elasticity_fixture as fx
 from cgfem.solve.linear import available_backends
 from cgfem.solve.saddle import FitConstraint, reduced_saddle
 

@@ -46,7 +46,11 @@ from __future__ import annotations
 
 import pytest
 
-from hertz_setup import INDENTER, SURFACES, HertzResult, assert_force_balance, solve_all
+from tests.support.hertz_setup import INDENTER, SURFACES, HertzResult, assert_force_balance, solve_all
+
+#: every test here solves a whole problem
+pytestmark = pytest.mark.slow
+
 
 LEVELS = (0, 1)
 

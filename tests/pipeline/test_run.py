@@ -5,13 +5,17 @@ from __future__ import annotations
 
 import json
 import textwrap
-from pathlib import Path
 
 import meshio
 import numpy as np
 import pytest
 
 from cgfem.cli import main
+from tests.support.paths import CASES
+
+#: every test here solves a whole problem
+pytestmark = pytest.mark.slow
+
 
 LINK = textwrap.dedent("""\
     name: link_pull
@@ -132,7 +136,7 @@ def test_memory_guard_compares_with_the_machine_not_the_free_memory():
     from cgfem.case import load_case
     from cgfem.errors import InputError
     from cgfem.run import check_memory, estimate_memory
-    case = load_case(Path(__file__).resolve().parents[1] / "config" / "cases" / "planar.yaml")
+    case = load_case(CASES / "planar.yaml")
     measures = {b.name: (2.5e-7, 3e-4) for b in case.bodies}
     need, _ = estimate_memory(case, 3, measures)
     check_memory(case, 3, measures, total=need + 1)
@@ -171,7 +175,7 @@ def test_interrupted_run_leaves_no_summary(tmp_path):
 
 def test_uniform_stress_run_reports_its_von_mises_and_reactions(tmp_path):
     from cgfem.run import run_case
-    from elasticity_cases import uniform_stress_case
+    from tests.support.elasticity_cases import uniform_stress_case
 
     sigma = np.array([[3.0, 1.0, 0.5], [1.0, -2.0, 0.3], [0.5, 0.3, 1.0]]) * 1e6
     case, _ = uniform_stress_case(sigma, 2.0e9, 0.3, (0.37, 0.61, 0.18))
@@ -273,7 +277,7 @@ def test_surface_file_holds_the_boundary_rule_points(tmp_path):
     there equals the step's nodal field interpolated (and, in this patch test, the exact
     linear field), the stress is the uniform one, and each point carries its patch."""
     from cgfem.run import build_models
-    from elasticity_cases import uniform_stress_case
+    from tests.support.elasticity_cases import uniform_stress_case
 
     sigma = np.array([[3.0, 1.0, 0.5], [1.0, -2.0, 0.3], [0.5, 0.3, 1.0]]) * 1e6
     case, eps = uniform_stress_case(sigma, 2.0e9, 0.3, (0.37, 0.61, 0.18))
@@ -309,7 +313,7 @@ def test_boundary_file_holds_the_fields_on_the_triangulated_boundary(tmp_path, s
     whose vertices carry the step's nodal fields interpolated; with nurbs_fe, in this patch
     test, the exact linear displacement, the uniform stress and its von Mises value, and
     each vertex its patch."""
-    from elasticity_cases import uniform_stress_case
+    from tests.support.elasticity_cases import uniform_stress_case
     from cgfem.run import run_case
 
     sigma = np.array([[3.0, 1.0, 0.5], [1.0, -2.0, 0.3], [0.5, 0.3, 1.0]]) * 1e6

@@ -12,10 +12,10 @@ from pathlib import Path
 
 import pytest
 import yaml
+from tests.support.paths import REPO
 
 pytest.importorskip("snakemake")
 
-REPO = Path(__file__).resolve().parents[1]
 FIGURES = ["fig09", "fig10", "fig13", "fig14", "fig15", "fig17", "newton", "timings", "geometry"]
 
 

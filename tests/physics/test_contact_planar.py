@@ -8,15 +8,19 @@ surface, whose chamfered edges change the resultant."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from cgfem.case import load_case
 from cgfem.run import build_models, run_case
+from tests.support.paths import CASES
 
-CASE = Path(__file__).resolve().parents[1] / "config" / "cases" / "planar.yaml"
+#: every test here solves a whole problem
+pytestmark = pytest.mark.slow
+
+
+CASE = CASES / "planar.yaml"
 RESULTANT = 2.0 * 1e12 * 0.01 ** 3 / 6.0 * 0.0025
 
 

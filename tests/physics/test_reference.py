@@ -132,6 +132,7 @@ def level1() -> PlanarReference:
     return planar.solve(1)
 
 
+@pytest.mark.slow
 def test_planar_global_equilibrium(level1):
     exact = 2 * 10e11 * 0.01**3 / 6  # ∫ t_z over both lateral faces, N/m
     assert level1.lateral_force_z == pytest.approx(exact, rel=1e-13)
@@ -139,6 +140,7 @@ def test_planar_global_equilibrium(level1):
     assert abs(level1.interface_force + level1.lateral_force_z) <= 1e-10 * exact
 
 
+@pytest.mark.slow
 def test_planar_contact_closed_and_compressive_everywhere(level1):
     assert level1.tied.all()
     # the quadratic traction field, sampled inside every interface edge too
@@ -160,6 +162,7 @@ def test_planar_contact_closed_and_compressive_everywhere(level1):
     np.testing.assert_allclose(level1.strain(y, z, "lower")[:, 1, 2], 0.0, atol=1e-2 * 4e-4)
 
 
+@pytest.mark.slow
 def test_planar_energy_converges(level1):
     energies = [planar.solve(level).strain_energy for level in (0, 2)]
     d01, d12 = abs(level1.strain_energy - energies[0]), abs(energies[1] - level1.strain_energy)
@@ -181,6 +184,7 @@ def _gauss_points(ref: PlanarReference):
     return np.concatenate(xs), np.concatenate(ws), np.concatenate(bodies)
 
 
+@pytest.mark.slow
 def test_relative_energy_error_zero_and_known_perturbations(level1):
     x, w, body = _gauss_points(level1)
     eps = level1.strain(x[:, 1], x[:, 2], body)
@@ -199,6 +203,7 @@ def test_relative_energy_error_zero_and_known_perturbations(level1):
         expected, rel=1e-10)
 
 
+@pytest.mark.slow
 def test_strain_and_stress_plane_strain_and_body_choice(level1):
     y = np.array([0.003, 0.004, 0.007])
     z = np.array([0.002, 0.01, 0.015])
@@ -213,6 +218,7 @@ def test_strain_and_stress_plane_strain_and_body_choice(level1):
         level1.strain(y, z, "lower")  # z = 0.015 is in the upper block
 
 
+@pytest.mark.slow
 def test_save_load_round_trip(level1, tmp_path):
     path = level1.save(tmp_path / "planar.npz")
     loaded = PlanarReference.load(path)
@@ -222,6 +228,7 @@ def test_save_load_round_trip(level1, tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["planar.npz"]
 
 
+@pytest.mark.slow
 def test_command_line_writes_converged_reference(tmp_path, capsys):
     out = tmp_path / "ref" / "planar.npz"
     assert planar.main(["--out", str(out), "--tol-digits", "2", "--max-level", "3"]) == 0
@@ -232,6 +239,7 @@ def test_command_line_writes_converged_reference(tmp_path, capsys):
     assert planar.main(["--out", str(out), "--max-level", "0"]) == 2
 
 
+@pytest.mark.slow
 def test_relative_energy_error_of_a_coarse_level_is_its_energy_gap(level1):
     """Nested meshes: ||u_1 − u_0||²_E = 2 (U_1 − U_0), exactly.
 

@@ -9,7 +9,7 @@ from cgfem.case import parse_case, parse_yaml
 from cgfem.cli import main
 from cgfem.errors import InputError
 
-from test_case_load import PLANAR
+from tests.support.cases import PLANAR
 
 
 def _with_contact(entries: list[dict]) -> dict:

@@ -15,7 +15,7 @@ import pytest
 
 from cgfem.errors import InputError
 from cgfem.geometry.nurbs import NurbsSurface
-from nurbs_helpers import geomdl_surface
+from tests.support.nurbs_helpers import geomdl_surface
 from cgfem.geometry.refine import (
     bezier_patches,
     curve_elevate_degree,

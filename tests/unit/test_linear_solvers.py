@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-import elasticity_fixture as fx
+from tests.support import elasticity_fixture as fx
 from cgfem.solve import linear
 from cgfem.solve.linear import (BACKENDS, LinearSolverError, available_backends,
                                 choose_backend, factorize, rigid_body_modes)

@@ -9,7 +9,6 @@ three above 1e-11)."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,9 +16,14 @@ import pytest
 
 from cgfem.case import parse_case, parse_yaml
 from cgfem.run import run_case
-from test_newton_order import record_errors
+from tests.support.newton import record_errors
+from tests.support.paths import CASES
 
-CASE = Path(__file__).resolve().parents[1] / "config" / "cases" / "chain2_steel.yaml"
+#: every test here solves a whole problem
+pytestmark = pytest.mark.slow
+
+
+CASE = CASES / "chain2_steel.yaml"
 
 
 @pytest.mark.parametrize("surface", ["nurbs_fe", "facets"])
