@@ -20,8 +20,10 @@ triangle centroids), so one search costs O(n log n); each candidate is then solv
 first while the ray meets its plane within ``STICKY`` of its edges; for NURBS+FE a Newton solve on
 ``(xi, eta, g)`` per start in the numba kernel :mod:`cgfem.contact._ray_kernels`, the previous
 pairing first when there is one, the first admissible hit kept). Admissible: the master
-normal opposes the slave normal and ``|g| <= max_gap``. Rays whose segment cannot reach the
-master's element boxes (:meth:`NurbsFeSurface._may_hit`) are skipped.
+normal opposes the slave normal and ``|g| <= max_gap``. A search given no candidate seeds
+(``near``) first skips the rays whose segment cannot reach the master's element boxes
+(:meth:`NurbsFeSurface._may_hit`); a contact pair always gives them (its Verlet list,
+:meth:`cgfem.contact.pair.ContactPair.candidates`).
 """
 
 from __future__ import annotations
