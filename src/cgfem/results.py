@@ -1,5 +1,6 @@
 """Result files of a run: ``summary.json``, ``step_NNN.vtu``, ``surface_NNN.vtu`` and
-``boundary_NNN.vtu`` (DESIGN.md contracts; README "Result files" lists every field).
+``boundary_NNN.vtu`` (README "Result files" lists every field; the keys other tools rely on
+are fixed, new ones may be added).
 
 Every file is written to a hidden temporary name next to its target, flushed, then renamed
 onto it, so a reader never sees a partial file. ``summary.json`` is written last: a folder

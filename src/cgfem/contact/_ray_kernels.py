@@ -8,9 +8,10 @@ admissible hit (converged, ``|g| <= max_gap``, master normal against ``n1``) is 
 
 Flat data (all contiguous):
 
-- ``layout`` (n_patches, 6) int64 rows ``(p, q, n_u, n_v, knot offset, control offset)``:
-  patch ``k``'s ``knots_u`` are ``knots[o : o + n_u + p + 1]``, its ``knots_v`` follow them,
-  and its homogeneous control net (n_u, n_v, 4) is ``control[c : c + 4 n_u n_v]``;
+- ``layout`` (n_patches, 8) int64 rows ``(p, q, n_u, n_v, knot offset, control offset,
+  closed along u, closed along v)``: patch ``k``'s ``knots_u`` are
+  ``knots[o : o + n_u + p + 1]``, its ``knots_v`` follow them, and its homogeneous control
+  net (n_u, n_v, 4) is ``control[c : c + 4 n_u n_v]``;
 - the grid of the master space: ``origin`` (3,), ``h``, ``shape`` (3,) elements per axis,
   ``elements`` ascending grid ids of the active elements, ``connectivity`` (n_el, 8) and the
   nodal displacements ``u`` (n_nodes, 3);
@@ -216,7 +217,7 @@ def ray_newton(x1, n1, k, u0, v0, g0, max_gap, ray_tol, max_iter, layout, knots,
     a step leaving the patch's domain wraps around along a closed direction (``layout[k, 6:8]``)
     and is clipped onto the domain along an open one, and a clipped step that does not
     move is a stuck one. Stops converged (``|F| <= ray_tol h``), on a singular ``J``, a
-    stuck step, ``|g| > 4 max_gap`` or after ``max_iter`` iterations. ``out`` (3,) receives
+    stuck step, ``|g| > 4 max_gap`` or after ``max_iter`` iterations. ``out`` (4,) receives
     ``(xi, eta, g, slot)`` (the master element of the hit: ``prefer``, the element of the
     previous pairing, while ``Q`` lies within ``band`` of it, else the element holding
     ``Q``). Returns 1 converged with ``m2 . n1 < 0`` (``m2 = t_xi x t_eta``, the

@@ -20,8 +20,10 @@ triangle centroids), so one search costs O(n log n); each candidate is then solv
 first while the ray meets its plane within ``STICKY`` of its edges; for NURBS+FE a Newton solve on
 ``(xi, eta, g)`` per start in the numba kernel :mod:`cgfem.contact._ray_kernels`, the previous
 pairing first when there is one, the first admissible hit kept). Admissible: the master
-normal opposes the slave normal and ``|g| <= max_gap``. Rays whose segment cannot reach the
-master's element boxes (:meth:`NurbsFeSurface._may_hit`) are skipped.
+normal opposes the slave normal and ``|g| <= max_gap``. A search given no candidate seeds
+(``near``) first skips the rays whose segment cannot reach the master's element boxes
+(:meth:`NurbsFeSurface._may_hit`); a contact pair always gives them (its Verlet list,
+:meth:`cgfem.contact.pair.ContactPair.candidates`).
 """
 
 from __future__ import annotations
@@ -269,11 +271,11 @@ class RaySurface:
         m = int(np.ceil(2.0 * max_gap / self.spacing)) + 1
         ts = np.linspace(-max_gap, max_gap, m)
         samples = x1[:, None, :] + ts[None, :, None] * n1[:, None, :]
-        # sliding-midpoint splits: a median-split tree over points on a surface queried from
-        # off the surface is several times slower (the nearest seed is the same)
+        # sliding-midpoint splits: a median-split tree over points on a surface is slower to
+        # query from off the surface (the nearest seed is the same)
         tree = cKDTree(seeds_x, leafsize=32, balanced_tree=False, compact_nodes=False)
-        # a sample farther than SAMPLE_REACH spacings from every seed has none (10x faster
-        # than the unbounded query on chain2_steel at level 1, where most of these rays miss)
+        # a sample farther than SAMPLE_REACH spacings from every seed has none: the bounded
+        # query is much cheaper for the many rays that miss (docs/performance.md)
         _, idx = tree.query(samples.reshape(-1, 3), distance_upper_bound=SAMPLE_REACH * self.spacing,
                             workers=numba.get_num_threads())
         idx = idx.reshape(n, m)

@@ -69,7 +69,7 @@ def _null_space_svd(phi, rows, n, tol):
 def _null_space(phi, rows, n, tol):
     """Null vectors (f, n) of the matrix whose columns are ``phi[rows[:n]]``: Gauss-Jordan
     elimination with complete pivoting (stable on the nearly dependent columns of clustered
-    points, where partial pivoting lost 1e-7 of the moments; 3-4x cheaper than an SVD),
+    points, where partial pivoting loses accuracy in the moments; cheaper than an SVD),
     stopped when the largest remaining entry is below ``tol`` times the largest entry; one
     vector per free column."""
     d = phi.shape[1]

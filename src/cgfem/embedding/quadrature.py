@@ -14,7 +14,9 @@
 
 An element is cut when a piece of the boundary of positive area lies in it, whatever the
 signs of its nodes (a surface that enters and leaves through one face, a tube thinner than
-the element); otherwise it is inside or outside as its nodes are.
+the element); otherwise it is inside or outside as its centre is (for ``facets``: cut,
+inside or outside by its node signs). Why each rule is as it is:
+docs/methods/geometry-and-embedding.md.
 """
 
 from __future__ import annotations

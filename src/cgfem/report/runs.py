@@ -1,5 +1,6 @@
-"""Reading the result folder of one run (DESIGN.md "Contracts"): the only module of the
-report package that knows file and field names, so a rename is a change here alone.
+"""Reading the result folder of one run (the files :mod:`cgfem.results` and
+:mod:`cgfem.contact.output` write): the only module of the report package that knows file
+and field names, so a rename is a change here alone.
 
 A run folder ``results/runs/{case}/L{level}_{surface}/`` holds ``summary.json``,
 ``step_NNN.vtu`` (hexahedra of all bodies), ``surface_NNN.vtu`` (boundary points at their
