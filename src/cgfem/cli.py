@@ -12,7 +12,9 @@ line on stderr naming the offending field, no traceback).
 with a progress line per Newton iteration and per step on stderr. Exit codes: 0 converged
 (status ``converged``), 1 not converged (status ``failed``: Newton failed, the converged
 steps are written; or ``outer_not_converged``: every step solved but the outer loop of at
-least one stopped at ``solver.outer_passes`` above ``solver.outer_tol``), 2 bad input.
+least one stopped at ``solver.outer_passes`` above ``solver.outer_tol``), 2 bad input, 130
+or 143 interrupted by SIGINT or SIGTERM (status ``interrupted``: the converged steps are
+written, and ``summary.json`` says where the run stopped).
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from dataclasses import dataclass
 
 from cgfem import __version__
 from cgfem.case.model import SURFACES
-from cgfem.errors import InputError
+from cgfem.errors import InputError, RunInterrupted
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -158,30 +160,35 @@ def _cmd_run(args: argparse.Namespace) -> int:
     import time
 
     from cgfem.case.load import load_case
-    from cgfem.run import run_case
+    from cgfem.errors import RunInterrupted
+    from cgfem.run import INTERRUPTED, run_case
     from cgfem.solve.static import CONVERGED
 
     case = load_case(args.case)
     start = time.perf_counter()
-    interrupted = []
+    received: list[int] = []
 
-    def on_interrupt(signum, frame) -> None:
-        # stop at the next progress point, outside compiled code; a second Ctrl-C at once
-        if interrupted:
-            raise KeyboardInterrupt
-        interrupted.append(signum)
+    def on_signal(signum, frame) -> None:
+        # stop at the next progress point, outside compiled code; a second signal at once
+        if received:
+            raise RunInterrupted(signum)
+        received.append(signum)
 
     def log(message: str) -> None:
-        if interrupted:
-            raise KeyboardInterrupt
+        if received:
+            raise RunInterrupted(received[0])
         if not args.quiet:
             print(f"[{time.perf_counter() - start:8.2f} s] {message}", file=sys.stderr, flush=True)
 
-    previous = signal.signal(signal.SIGINT, on_interrupt)
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         status = run_case(case, args.level, args.surface, args.out, log)
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    if status.status == INTERRUPTED:
+        print(f"cgfem: interrupted ({status.message}); {status.summary}", file=sys.stderr)
+        return 128 + status.signum
     log(f"{status.status}: {status.summary}" + (f" ({status.message})" if status.message else ""))
     return EXIT_OK if status.status == CONVERGED else EXIT_FAILED
 
@@ -243,9 +250,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except InputError as err:
         print(f"cgfem: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except KeyboardInterrupt:  # the files written so far are complete; no summary.json yet
+    except (KeyboardInterrupt, RunInterrupted) as stop:  # before any step: nothing written
         print("cgfem: interrupted", file=sys.stderr)
-        return 130
+        return 128 + getattr(stop, "signum", 2)
     except BrokenPipeError:  # output piped into a pager or `head` that stopped reading
         sys.stdout = None
         return EXIT_OK

@@ -8,12 +8,15 @@ estimated from the B-rep volume and area and refused if the machine does not hav
 
 from __future__ import annotations
 
+import os
 import platform
+import signal
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+import numba
 import numpy as np
 
 from cgfem import __version__
@@ -24,7 +27,7 @@ from cgfem.contact.assembly import summary as contact_summary
 from cgfem.contact.build import DEFINITIONS as CONTACT_DEFINITIONS, build_pair
 from cgfem.contact.fit import FIT_NAME_SEPARATOR, fit_mesh, write_fit_json, write_fit_vtu
 from cgfem.contact.output import write_contact
-from cgfem.errors import InputError
+from cgfem.errors import InputError, RunInterrupted
 from cgfem.fem.body import BodyModel, boundary_of
 from cgfem.fem.materials import von_mises
 from cgfem.fem import spr
@@ -32,7 +35,7 @@ from cgfem.fem.spr import energy_norm, zz_estimate
 from cgfem.geometry.builders import build_solid
 from cgfem.geometry.measure import areas_by_name, volume
 from cgfem.results import clear_previous, write_json_atomic, write_step
-from cgfem.solve.linear import available_backends
+from cgfem.solve.linear import available_backends, mkl_threads
 from cgfem.solve.static import StepRecord, System, solve_static
 
 #: bytes per inside and per cut element: pattern scatter map, quadrature, tangent data and
@@ -42,11 +45,24 @@ BYTES_PER_ELEMENT = 90_000
 BYTES_PER_CUT_ELEMENT = 180_000
 
 
+#: the environment variables that set the thread counts of numba, OpenMP, MKL and OpenBLAS
+THREAD_VARIABLES = ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS",
+                    "MKL_DYNAMIC", "MKL_CBWR")
+#: the status of a run stopped by a signal: its converged steps are written, and its summary
+#: says where it stopped
+INTERRUPTED = "interrupted"
+
+
 @dataclass(frozen=True)
 class RunStatus:
-    status: str            # converged | outer_not_converged | failed
+    """How a run ended: ``status`` (``converged``, ``outer_not_converged``, ``failed`` or
+    :data:`INTERRUPTED`), its ``summary.json``, why if not converged, and the signal's
+    number if interrupted."""
+
+    status: str
     summary: Path
     message: str = ""
+    signum: int = 0
 
 
 def machine_memory() -> int:
@@ -99,6 +115,20 @@ def _size(n_bytes: float) -> str:
         if n_bytes < 1024.0:
             return f"{n_bytes:.1f} {unit}"
     return f"{n_bytes / 1024.0:.1f} EiB"
+
+
+def thread_settings() -> dict:
+    """The threads the run's libraries used: numba's count and threading layer, MKL's (PARDISO,
+    None without it) and the thread variables of the environment. Results are bitwise
+    repeatable for the same settings (PARDISO in its reproducible mode, numba's parallel
+    kernels writing disjoint outputs); other thread counts give the same path (Newton
+    iterations, active points) to round-off."""
+    try:
+        layer = numba.threading_layer()
+    except ValueError:          # no parallel kernel has run in this process
+        layer = None
+    return {"numba": numba.get_num_threads(), "numba_layer": layer, "mkl": mkl_threads(),
+            "environment": {k: os.environ[k] for k in THREAD_VARIABLES if k in os.environ}}
 
 
 def embed_body(solid, body: Body, level: int, surface: str) -> Embedding:
@@ -259,9 +289,14 @@ def _remove_created(created: list[Path]) -> None:
 
 def run_case(case: Case, level: int, surface: str, out: Path,
              log: Callable[[str], None] = lambda m: None) -> RunStatus:
-    """Solve ``case`` and write its results to ``out``; returns the run status
-    (``converged``, ``outer_not_converged`` or ``failed``, see :mod:`cgfem.solve.static`).
-    Bad input raises :class:`InputError` and leaves no folder this call created."""
+    """Solve ``case`` and write its results to ``out``.
+
+    Returns the run status (``converged``, ``outer_not_converged`` or ``failed``, see
+    :mod:`cgfem.solve.static`; :data:`INTERRUPTED` when ``log`` raised
+    :class:`~cgfem.errors.RunInterrupted` once the output folder was made: the converged
+    steps' files and a summary with that status are written). Bad input raises
+    :class:`InputError` and leaves no folder this call created.
+    """
     if level < 0:
         raise InputError("--level", f"must be >= 0, got {level}")
     if surface not in SURFACES:
@@ -278,25 +313,41 @@ def run_case(case: Case, level: int, surface: str, out: Path,
             out.mkdir(parents=True, exist_ok=True)
         except OSError as err:
             raise InputError("--out", f"cannot create {out}: {err.strerror or err}") from None
-        clear_previous(out)
-        built = time.perf_counter()
-        steps: list[dict] = []
-        system = System(models, build_pairs(case, models, solids, surface, log))
-        views = [BoundaryView.of(m, solids[m.name]) for m in models]
-        result = solve_static(system, case.steps, case.solver, log,
-                              lambda record: steps.append(_write_step(out, system, record, len(steps) + 1,
-                                                                      views, log)))
     except InputError:
         _remove_created(created)
         raise
-    summary = {"case": case.name, "level": level, "surface": surface, "status": result.status,
-               "message": result.message, "kinematics": case.kinematics, "bodies": measures,
-               "steps": steps,
-               "timings": {"build_s": built - started, "solve_s": time.perf_counter() - built},
-               "versions": {"cgfem": __version__, "python": platform.python_version(),
-                            "numpy": np.__version__}}
-    path = write_json_atomic(out / "summary.json", summary)
-    return RunStatus(result.status, path, result.message)
+    clear_previous(out)
+    built = time.perf_counter()
+    steps: list[dict] = []
+
+    def summary(status: str, message: str) -> Path:
+        return write_json_atomic(out / "summary.json", {
+            "case": case.name, "level": level, "surface": surface, "status": status,
+            "message": message, "kinematics": case.kinematics, "bodies": measures, "steps": steps,
+            "timings": {"build_s": built - started, "solve_s": time.perf_counter() - built},
+            "threads": thread_settings(),
+            "versions": {"cgfem": __version__, "python": platform.python_version(), "numpy": np.__version__}})
+
+    try:
+        system = System(models, build_pairs(case, models, solids, surface, log))
+        views = [BoundaryView.of(m, solids[m.name]) for m in models]
+
+        def on_step(record: StepRecord) -> None:
+            steps.append(_write_step(out, system, record, len(steps) + 1, views))
+            outer = "" if record.outer_converged else ", outer loop NOT converged"
+            log(f"step {len(steps)} converged at load factor {record.load_factor:.4g} "
+                f"({record.outer_passes} outer passes{outer}, {record.seconds:.2f} s)")
+
+        result = solve_static(system, case.steps, case.solver, log, on_step)
+    except InputError:
+        _remove_created(created)
+        raise
+    except RunInterrupted as stop:
+        name = signal.Signals(stop.signum).name
+        message = (f"interrupted by {name} after {len(steps)} converged step(s)"
+                   + (f", at load factor {steps[-1]['load_factor']:.6g}" if steps else ""))
+        return RunStatus(INTERRUPTED, summary(INTERRUPTED, message), message, stop.signum)
+    return RunStatus(result.status, summary(result.status, result.message), result.message)
 
 
 def _write_fits(out: Path, system: System, record: StepRecord, number: int) -> dict:
@@ -330,8 +381,8 @@ def _floating_summary(system: System, record: StepRecord, unknowns: np.ndarray) 
                                     "residual": float(np.linalg.norm(r[i]))} for i in system.floating}
 
 
-def _write_step(out: Path, system: System, record: StepRecord, number: int, views: list[BoundaryView],
-                log: Callable[[str], None]) -> dict:
+def _write_step(out: Path, system: System, record: StepRecord, number: int,
+                views: list[BoundaryView]) -> dict:
     """Write the files of step ``number`` and return its entry of ``summary.json``."""
     models = system.bodies
     contact = {"force": [0.0, 0.0, 0.0], "active_points": 0, "max_pressure": 0.0, "pairs": {}}
@@ -367,7 +418,4 @@ def _write_step(out: Path, system: System, record: StepRecord, number: int, view
              "error_estimate": {n: o["error_estimate"] for n, o in zip(names, outputs)},
              "energy_norm": {n: o["energy_norm"] for n, o in zip(names, outputs)},
              "seconds": record.seconds}
-    outer = "" if record.outer_converged else ", outer loop NOT converged"
-    log(f"step {number} converged at load factor {record.load_factor:.4g} "
-        f"({record.outer_passes} outer passes{outer}, {record.seconds:.2f} s)")
     return entry

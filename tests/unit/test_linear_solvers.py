@@ -296,3 +296,24 @@ def test_pyamg_stops_at_a_looser_per_solve_tolerance(symmetric: bool, cube) -> N
         direct = factorize(K, backend=backend)
         direct.solve(f, 1e-2)
         assert direct.info["residuals"][0] < 1e-13
+
+
+@pytest.mark.slow
+@pytest.mark.skipif("pardiso" not in available_backends(), reason="pypardiso is not installed")
+def test_pardiso_repeats_bitwise_under_a_concurrent_load() -> None:
+    """PARDISO's parallel factorization (26k unknowns, two threads) gives the same bits every
+    time while two other processes load the machine: in its default mode it gave two or
+    three different solutions out of six, in its reproducible mode (``iparm(34)``) one."""
+    import hashlib
+    import subprocess
+    import sys
+
+    K, f, _ = fx.clamped_cube(20)
+    burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
+    try:
+        digests = {hashlib.sha1(factorize(K, backend="pardiso").solve(f).tobytes()).hexdigest()
+                   for _ in range(6)}
+    finally:
+        for proc in burners:
+            proc.kill()
+    assert len(digests) == 1

@@ -53,6 +53,9 @@ SAMPLE_REACH = 2.5
 CANDIDATES = 4
 #: barycentric tolerance of a facet hit
 FACET_TOL = 1e-10
+#: facet hits of one ray whose gaps differ by less than this fraction of h are a tie
+#: (:meth:`FacetSurface._take`)
+TIE = 1e-12
 
 
 def shape_derivatives(xi: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -545,9 +548,16 @@ class FacetSurface:
 
     def _take(self, best: RayHits, cand: np.ndarray, rows: np.ndarray, tris: np.ndarray, l1: np.ndarray,
               l2: np.ndarray, g: np.ndarray, nearest: bool) -> None:
-        """Write hits into ``best``: per ray the nearest (``nearest``) or its only one."""
+        """Write hits into ``best``: per ray the nearest (``nearest``) or its only one. Hits
+        within ``TIE h`` of a ray's nearest (a ray through a shared edge meets both
+        triangles at the same ``g`` up to round-off) go to the lowest triangle id, so the
+        choice does not hinge on round-off."""
         if nearest and rows.size:
-            order = np.lexsort((np.abs(g), rows))
+            size = np.abs(g)
+            nearest_g = np.full(best.found.size, np.inf)
+            np.minimum.at(nearest_g, rows, size)
+            close = np.flatnonzero(size <= nearest_g[rows] + TIE * self.h)
+            order = close[np.lexsort((cand[tris[close]], rows[close]))]
             first = order[np.concatenate([[True], rows[order][1:] != rows[order][:-1]])]
             rows, tris, l1, l2, g = rows[first], tris[first], l1[first], l2[first], g[first]
         best.found[rows] = True

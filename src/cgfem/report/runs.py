@@ -38,10 +38,12 @@ CONTACT_FIELDS = ("gap", PRESSURE, "p_N", ACTIVE, "normal", CONTACT_WEIGHT, CONT
 
 #: statuses of summary.json: every step solved with the outer loop below outer_tol; every
 #: step solved but the outer loop of at least one stopped at its cap (exit 1); a step failed
-#: after every cut-back, only the converged steps listed (exit 1)
+#: after every cut-back, only the converged steps listed (exit 1); stopped by a signal, the
+#: converged steps listed (exit 130 or 143)
 CONVERGED = "converged"
 OUTER_NOT_CONVERGED = "outer_not_converged"
 FAILED = "failed"
+INTERRUPTED = "interrupted"
 
 
 @dataclass(frozen=True)
@@ -101,7 +103,8 @@ class Run:
         if self.outer_not_converged:
             return "outer loop not converged"
         reached = self.load_factors()[-1] if self.n_steps else 0.0
-        return f"failed beyond load {reached:.3g}"
+        what = "interrupted" if self.status == INTERRUPTED else "failed"
+        return f"{what} beyond load {reached:.3g}"
 
     @property
     def steps(self) -> list[dict]:
