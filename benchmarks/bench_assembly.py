@@ -201,7 +201,7 @@ def ours(mesh: str) -> dict:
     def per_point():
         data = pattern.zeros()
         for elements in pattern.colours:
-            kern.integrate_tangent(A, -1, points.xi, points.w, points.offsets, h, elements,
+            kern.integrate_tangent(*space.kernel_element, A, -1, points.xi, points.w, points.offsets, h, elements,
                                    pattern.scatter, data)
         return pattern.matrix(data)
 

@@ -7,7 +7,8 @@ every body in its grid of that level and prints the element counts and the volum
 of the quadrature of the surface definition ``S``. Exit codes: 0 success, 2 bad input (one
 line on stderr naming the offending field, no traceback).
 
-``cgfem run CASE.yaml --level L --surface S --out DIR`` solves the case and writes
+``cgfem run CASE.yaml --level L --surface S --out DIR [--order P]`` solves the case with
+hexahedra of order ``P`` (1, default, or 2) and writes
 ``DIR/summary.json``, ``DIR/step_NNN.vtu`` and ``DIR/surface_NNN.vtu`` (:mod:`cgfem.run`),
 with a progress line per Newton iteration and per step on stderr. Exit codes: 0 converged
 (status ``converged``), 1 not converged (status ``failed``: Newton failed, the converged
@@ -182,7 +183,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        status = run_case(case, args.level, args.surface, args.out, log)
+        status = run_case(case, args.level, args.surface, args.out, log, args.order)
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
@@ -234,6 +235,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--surface", choices=sorted(SURFACES), required=True, help=SURFACE_HELP)
     run.add_argument("--out", required=True, metavar="DIR",
                      help="result folder (created when the run starts; must not be a file)")
+    run.add_argument("--order", type=int, default=1,
+                     help="element order: 1, the trilinear hexahedron (default, the paper's), or 2, "
+                          "the triquadratic one (27 nodes; not yet with contact)")
     run.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     run.set_defaults(func=_cmd_run)
     warmup = sub.add_parser("warmup", help="compile and cache the numba kernels (two small contact "

@@ -29,6 +29,7 @@ from cgfem.contact.fit import FIT_NAME_SEPARATOR, fit_mesh, write_fit_json, writ
 from cgfem.contact.output import write_contact
 from cgfem.errors import InputError, RunInterrupted
 from cgfem.fem.body import BodyModel, boundary_of
+from cgfem.fem.element import ORDERS, hexahedron
 from cgfem.fem.materials import von_mises
 from cgfem.fem import spr
 from cgfem.fem.spr import energy_norm, zz_estimate
@@ -38,11 +39,14 @@ from cgfem.results import clear_previous, write_json_atomic, write_step
 from cgfem.solve.linear import available_backends, mkl_threads
 from cgfem.solve.static import StepRecord, System, solve_static
 
-#: bytes per inside and per cut element: pattern scatter map, quadrature, tangent data and
-#: the factorization's fill. Calibrated on the Neo-Hookean half torus at level 3 (86k DOFs,
-#: 16.6k inside + 7.7k cut elements, PARDISO): peak 3.1 GiB; this estimate gives 3.5 GiB.
+#: bytes per inside and per cut trilinear element: pattern scatter map, quadrature, tangent
+#: data and the factorization's fill (calibrated on the Neo-Hookean half torus at level 3 with
+#: PARDISO, an upper bound of its peak; docs/performance.md)
 BYTES_PER_ELEMENT = 90_000
 BYTES_PER_CUT_ELEMENT = 180_000
+#: the memory of an element of each order relative to the trilinear one: 3.4 times the dofs,
+#: 11 times the scatter map and the element matrices, more fill
+ORDER_MEMORY = {1: 1.0, 2: 12.0}
 
 
 #: the environment variables that set the thread counts of numba, OpenMP, MKL and OpenBLAS
@@ -82,26 +86,28 @@ def brep_measures(solid) -> tuple[float, float]:
     return volume(solid), float(sum(areas_by_name(solid).values()))
 
 
-def estimate_memory(case: Case, level: int, measures: dict[str, tuple[float, float]]) -> tuple[int, int]:
-    """Estimated bytes and DOFs of ``case`` at ``level`` from the B-rep volume and area of
-    every body (``measures``): inside elements ~ V / h^3, cut elements ~ 2 A / h^2."""
+def estimate_memory(case: Case, level: int, measures: dict[str, tuple[float, float]], order: int = 1
+                    ) -> tuple[int, int]:
+    """Estimated bytes and DOFs of ``case`` at ``level`` with elements of ``order`` from the
+    B-rep volume and area of every body (``measures``): inside elements ~ V / h^3, cut
+    elements ~ 2 A / h^2, ``order^3`` nodes per element."""
     total, dofs = 0, 0
     for body in case.bodies:
         h = body.grid.h(level)
         v, a = measures[body.name]
         inside, cut = v / h**3, 2.0 * a / h**2
-        total += int(BYTES_PER_ELEMENT * inside + BYTES_PER_CUT_ELEMENT * cut)
-        dofs += int(3 * (inside + cut))
+        total += int(ORDER_MEMORY[order] * (BYTES_PER_ELEMENT * inside + BYTES_PER_CUT_ELEMENT * cut))
+        dofs += int(3 * order**3 * (inside + cut))
     return total, dofs
 
 
 def check_memory(case: Case, level: int, measures: dict[str, tuple[float, float]],
-                 total: int | None = None) -> None:
+                 total: int | None = None, order: int = 1) -> None:
     """Refuse a level whose estimated memory (:func:`estimate_memory`, an upper bound for
     ``facets`` and ``nurbs_fe``: planar at level 3 is estimated at 19 GiB and peaks at 6 GB)
     exceeds the machine's physical memory ``total`` (default :func:`machine_memory`). Not the
     memory free at the moment: in the pipeline other runs hold some of it while they last."""
-    need, dofs = estimate_memory(case, level, measures)
+    need, dofs = estimate_memory(case, level, measures, order)
     have = machine_memory() if total is None else total
     if need > have:
         raise InputError("--level", f"level {level} needs about {_size(need)} "
@@ -131,22 +137,29 @@ def thread_settings() -> dict:
             "environment": {k: os.environ[k] for k in THREAD_VARIABLES if k in os.environ}}
 
 
-def embed_body(solid, body: Body, level: int, surface: str) -> Embedding:
+def embed_body(solid, body: Body, level: int, surface: str, order: int = 1) -> Embedding:
     """``body`` embedded in its grid of ``level`` for the surface definition ``surface``
     (``facets``, ``nurbs_fe`` or ``nurbs_fit``): the boundary quadrature of
-    ``SURFACES[surface]``, the definition's name kept as ``Embedding.definition``."""
-    return embed(solid, grid_for(solid, body.grid.h0, level, body.grid.offset), SURFACES[surface],
-                 definition=surface)
+    ``SURFACES[surface]``, the definition's name kept as ``Embedding.definition``, and rules
+    exact to the degree the element of ``order`` needs (:attr:`~cgfem.fem.element.Hexahedron.degree`)."""
+    grid = grid_for(solid, body.grid.h0, level, body.grid.offset)
+    degree = hexahedron(order).degree
+    if degree == 2:
+        return embed(solid, grid, SURFACES[surface], definition=surface)
+    return embed(solid, grid, SURFACES[surface], definition=surface, degree=degree)
 
 
-def build_models(case: Case, level: int, surface: str, log: Callable[[str], None]) -> tuple[list, dict]:
+def build_models(case: Case, level: int, surface: str, log: Callable[[str], None], order: int = 1
+                 ) -> tuple[list, dict]:
     """Embed and discretize every body; returns the models and per-body measures."""
-    models, measures, _ = build_bodies(case, level, surface, log)
+    models, measures, _ = build_bodies(case, level, surface, log, order)
     return models, measures
 
 
-def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None]) -> tuple[list, dict, dict]:
-    """Embed and discretize every body: the models, per-body measures and the solids."""
+def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None], order: int = 1
+                 ) -> tuple[list, dict, dict]:
+    """Embed and discretize every body with the element of ``order``: the models, per-body
+    measures and the solids."""
     if case.contact and surface not in CONTACT_DEFINITIONS:
         raise InputError("--surface", f"contact with {surface!r} is not implemented yet "
                          f"(available: {', '.join(CONTACT_DEFINITIONS)})")
@@ -156,13 +169,14 @@ def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None
                                                    "(--surface nurbs_fe or nurbs_fit), not facets")
     solids = {b.name: build_solid(b.geometry) for b in case.bodies}
     brep = {name: brep_measures(solid) for name, solid in solids.items()}
-    check_memory(case, level, brep)
+    check_memory(case, level, brep, order=order)
     finite = case.kinematics == "finite"
     models, measures = [], {}
     for body in case.bodies:
         tic = time.perf_counter()
-        emb = embed_body(solids[body.name], body, level, surface)
-        model = BodyModel.build(body, emb, boundary_of(case, body.name), case.solver, finite)
+        emb = embed_body(solids[body.name], body, level, surface, order)
+        model = BodyModel.build(body, emb, boundary_of(case, body.name), case.solver, finite,
+                                hexahedron(order))
         models.append(model)
         measures[body.name] = {
             "nodes": model.space.n_nodes, "dofs": model.n_dofs,
@@ -255,7 +269,8 @@ def step_outputs(model: BodyModel, u: np.ndarray, recovered: np.ndarray,
     status = np.where(space.cut, 2, 1)
     surface = {"points": boundary.points.x, "displacement": boundary.values(space, u),
                "stress": stress_boundary, "von_mises": vm_boundary, "patch": boundary.patch}
-    return {"points": space.coordinates, "cells": space.connectivity, "displacement": u.reshape(-1, 3),
+    return {"points": space.coordinates, "cells": space.connectivity, "cell_type": space.element.cell_type,
+            "displacement": u.reshape(-1, 3),
             "stress": nodal_cauchy, "von_mises_nodal": vm_nodes, "status": status,
             "von_mises_max_qp": per_element, "max_von_mises": float(per_element.max(initial=0.0)),
             "von_mises_max_nodal": float(vm_nodes.max(initial=0.0)), "surface": surface,
@@ -288,8 +303,8 @@ def _remove_created(created: list[Path]) -> None:
 
 
 def run_case(case: Case, level: int, surface: str, out: Path,
-             log: Callable[[str], None] = lambda m: None) -> RunStatus:
-    """Solve ``case`` and write its results to ``out``.
+             log: Callable[[str], None] = lambda m: None, order: int = 1) -> RunStatus:
+    """Solve ``case`` with the hexahedra of ``order`` (1 or 2) and write its results to ``out``.
 
     Returns the run status (``converged``, ``outer_not_converged`` or ``failed``, see
     :mod:`cgfem.solve.static`; :data:`INTERRUPTED` when ``log`` raised
@@ -301,6 +316,10 @@ def run_case(case: Case, level: int, surface: str, out: Path,
         raise InputError("--level", f"must be >= 0, got {level}")
     if surface not in SURFACES:
         raise InputError("--surface", f"must be one of {', '.join(SURFACES)}, got {surface!r}")
+    if order not in ORDERS:
+        raise InputError("--order", f"must be one of {', '.join(map(str, ORDERS))}, got {order!r}")
+    if case.contact and order != 1:
+        raise InputError("--order", f"contact with order {order} is not implemented yet (order 1 only)")
     if case.solver.linear != "auto" and case.solver.linear not in available_backends():
         raise InputError("solver.linear", f"backend {case.solver.linear!r} is not available here "
                          f"(available: {', '.join(available_backends())})")
@@ -308,7 +327,7 @@ def run_case(case: Case, level: int, surface: str, out: Path,
     created = check_out(out)
     started = time.perf_counter()
     try:
-        models, measures, solids = build_bodies(case, level, surface, log)
+        models, measures, solids = build_bodies(case, level, surface, log, order)
         try:
             out.mkdir(parents=True, exist_ok=True)
         except OSError as err:
@@ -322,7 +341,7 @@ def run_case(case: Case, level: int, surface: str, out: Path,
 
     def summary(status: str, message: str) -> Path:
         return write_json_atomic(out / "summary.json", {
-            "case": case.name, "level": level, "surface": surface, "status": status,
+            "case": case.name, "level": level, "surface": surface, "order": order, "status": status,
             "message": message, "kinematics": case.kinematics, "bodies": measures, "steps": steps,
             "timings": {"build_s": built - started, "solve_s": time.perf_counter() - built},
             "threads": thread_settings(),

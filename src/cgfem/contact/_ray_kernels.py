@@ -19,7 +19,7 @@ Flat data (all contiguous):
   to the first ``start_piece < 0``.
 
 NURBS evaluation is :func:`cgfem.geometry._nurbs_kernels.surface_derivs`, the grid element
-:func:`cgfem.fem._element_kernels.locate`, the H8 basis :func:`~cgfem.fem._element_kernels.basis`.
+:func:`cgfem.fem._element_kernels.locate`, the element's basis :func:`~cgfem.fem._element_kernels.basis`.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from cgfem.fem._element_kernels import basis, locate
+from cgfem.fem._element_kernels import basis, element_table, locate
 from cgfem.geometry._nurbs_kernels import surface_derivs
 
 #: ``trace`` status of a point: a Newton iterate's ``Q`` lay in no active element
@@ -102,14 +102,16 @@ def master_point_in(k, uu, vv, layout, knots, control, origin, h, shape, element
     e = slot[0]
     if e < 0:
         return e
-    N = np.empty(8)
-    dN = np.empty((8, 3))
-    basis(xi[0], h, N, dN)
+    ijk, order = element_table(connectivity.shape[1])
+    m = ijk.shape[0]
+    N = np.empty(m)
+    dN = np.empty((m, 3))
+    basis(ijk, order, xi[0], h, N, dN)
     for c in range(3):
         x[c] = SKL[0, 0, c]
         t[0, c] = SKL[1, 0, c]
         t[1, c] = SKL[0, 1, c]
-    for a in range(8):
+    for a in range(m):
         node = connectivity[e, a]
         psi0 = dN[a, 0] * SKL[1, 0, 0] + dN[a, 1] * SKL[1, 0, 1] + dN[a, 2] * SKL[1, 0, 2]
         psi1 = dN[a, 0] * SKL[0, 1, 0] + dN[a, 1] * SKL[0, 1, 1] + dN[a, 2] * SKL[0, 1, 2]

@@ -38,7 +38,8 @@ from cgfem.contact import _ray_kernels as _rk
 from cgfem.contact._facet_kernels import triangle_hits
 from cgfem.contact.kinematics import MasterPoints, SlaveFrames
 from cgfem.embedding.partition import SurfaceQuadrature
-from cgfem.fem.space import LOCATE_TOL, NODE_XI, Space, shape_functions
+from cgfem.fem.element import HEX8, Hexahedron
+from cgfem.fem.space import LOCATE_TOL, Space, shape_functions
 from cgfem.geometry.nurbs import NurbsSurface
 from cgfem.geometry.solid import Solid
 
@@ -58,19 +59,12 @@ FACET_TOL = 1e-10
 TIE = 1e-12
 
 
-def shape_derivatives(xi: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """H8 shape functions (n, 8), physical gradients (n, 8, 3) (:func:`shape_functions`) and
-    physical second derivatives (n, 8, 3, 3) at local coordinates ``xi`` (n, 3) of a cube of
-    size ``h``: ``d2N_a/dX_i dX_j = (2/h)^2 s_ai s_aj (1 + s_ak xi_k) / 8`` for ``i != j``
-    (``k`` the third axis), zero on the diagonal."""
-    xi = np.ascontiguousarray(xi, dtype=float)
-    N, dN = shape_functions(xi, h)
-    f = 1.0 + xi[:, None, :] * NODE_XI[None, :, :]                 # (n, 8, 3)
-    s = NODE_XI * (2.0 / h)
-    d2N = np.zeros(f.shape + (3,))
-    for i, j, k in ((0, 1, 2), (0, 2, 1), (1, 2, 0)):
-        d2N[..., i, j] = d2N[..., j, i] = s[None, :, i] * s[None, :, j] * f[..., k] / 8.0
-    return N, dN, d2N
+def shape_derivatives(xi: np.ndarray, h: float, element: Hexahedron = HEX8
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Shape functions (n, n_nodes), physical gradients (n, n_nodes, 3) and physical second
+    derivatives (n, n_nodes, 3, 3) of ``element`` at local coordinates ``xi`` (n, 3) of a cube
+    of size ``h`` (:meth:`cgfem.fem.element.Hexahedron.tabulate`)."""
+    return element.tabulate(xi, h, second=True)
 
 
 def element_values(space: Space, u: np.ndarray, slots: np.ndarray) -> np.ndarray:

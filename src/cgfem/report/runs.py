@@ -73,6 +73,11 @@ class Run:
         return str(self.summary["surface"])
 
     @property
+    def order(self) -> int:
+        """The element order of the run (1 for summaries written before orders existed)."""
+        return int(self.summary.get("order", 1))
+
+    @property
     def status(self) -> str:
         return str(self.summary["status"])
 
