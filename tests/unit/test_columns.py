@@ -35,7 +35,7 @@ def _local_moments(grid, keys, key, x, w, element, dim: int = 3) -> np.ndarray:
     xi = (x - grid.element_center(grid.element_ijk(element))) / (0.5 * grid.h)
     phi = np.empty((len(x), 27))
     for i, p in enumerate(xi):
-        legendre_row(p, phi[i])
+        legendre_row(p, 2, phi[i])
     out = np.zeros((len(keys), 27))
     np.add.at(out, rows, (w / (0.5 * grid.h) ** dim)[:, None] * phi)
     return out
@@ -171,7 +171,7 @@ def test_recombination_keeps_moments_with_at_most_27_positive_weights(n, spread,
         x[:, 2] = -1.0 + spread * (x[:, 2] + 1.0)  # a sliver when spread is small
     phi = np.empty((n, 27))
     for i, p in enumerate(x):
-        legendre_row(p, phi[i])
+        legendre_row(p, 2, phi[i])
     w = rng.uniform(0.1, 1.0, n)
     target = w @ phi
     recombine(phi, w, robust)
