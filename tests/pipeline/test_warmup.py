@@ -35,9 +35,11 @@ def test_every_warmup_run_converges_and_carries_its_load(monkeypatch, capsys):
         # the pulled link is held back by the fixed one: the force on the slave points to -y
         assert runs["warmup_links", surface].contact_force[1] < 0.0
         # the lower box, held along z by contact alone, passes its whole load to the upper
-        # one: exactly on the exact boundary, within the chamfers' area error on facets
+        # one: exactly on the exact boundary; facets integrate the traction over the
+        # tessellated zmin face, whose chamfer triangles at the box's edges add area (+5.3 %
+        # at h 0.3)
         fz = runs["warmup_blocks", surface].contact_force[2]
-        assert fz == pytest.approx(-PRESSURE_FORCE, rel=1e-8 if surface != "facets" else 0.05)
+        assert fz == pytest.approx(-PRESSURE_FORCE, rel=1e-8 if surface != "facets" else 0.1)
 
 
 def test_a_failed_warmup_run_exits_1_with_one_line(monkeypatch, capsys):
