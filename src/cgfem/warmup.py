@@ -12,8 +12,9 @@ It solves two small contact problems, on the coarsest grids, with each surface d
 two half-torus links pulled apart by 0.5 mm (Neo-Hookean, finite strain; rational NURBS
 patches, trimmed caps; the facets' chord gap at this grid is wider than 0.1 mm) and two
 boxes pressed together (linear elastic, small strain; planar patches, a body held by
-contact alone along z). Together they call every kernel the examples call: embedding, assembly in both kinematics, SPR recovery, contact search, residual and
-tangent with each surface definition, the fit of ``nurbs_fit`` and the boundary tessellation.
+contact alone along z). Together they call every kernel the examples call: embedding,
+assembly in both kinematics, SPR recovery, contact search, residual and tangent with each
+surface definition, the fit of ``nurbs_fit`` and the boundary tessellation.
 Each run must converge; the results are thrown away.
 """
 
