@@ -142,11 +142,8 @@ def embed_body(solid, body: Body, level: int, surface: str, order: int = 1) -> E
     (``facets``, ``nurbs_fe`` or ``nurbs_fit``): the boundary quadrature of
     ``SURFACES[surface]``, the definition's name kept as ``Embedding.definition``, and rules
     exact to the degree the element of ``order`` needs (:attr:`~cgfem.fem.element.Hexahedron.degree`)."""
-    grid = grid_for(solid, body.grid.h0, level, body.grid.offset)
-    degree = hexahedron(order).degree
-    if degree == 2:
-        return embed(solid, grid, SURFACES[surface], definition=surface)
-    return embed(solid, grid, SURFACES[surface], definition=surface, degree=degree)
+    return embed(solid, grid_for(solid, body.grid.h0, level, body.grid.offset), SURFACES[surface],
+                 definition=surface, degree=hexahedron(order).degree)
 
 
 def build_models(case: Case, level: int, surface: str, log: Callable[[str], None], order: int = 1

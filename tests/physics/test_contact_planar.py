@@ -25,7 +25,7 @@ RESULTANT = 2.0 * 1e12 * 0.01 ** 3 / 6.0 * 0.0025
 
 
 @pytest.mark.parametrize("surface", ["nurbs_fe", "facets"])
-@pytest.mark.parametrize("level", [0, 1, 2])
+@pytest.mark.parametrize("level", [0, 1, pytest.param(2, marks=pytest.mark.long)])
 def test_contact_force_balances_the_tractions(tmp_path, surface, level):
     case = load_case(CASE)
     status = run_case(case, level, surface, tmp_path)

@@ -48,7 +48,7 @@ pytestmark = pytest.mark.slow
 
 
 CASE = CASES / "chain2_steel.yaml"
-@pytest.mark.parametrize("surface", ["facets", "nurbs_fe"])
+@pytest.mark.parametrize("surface", [pytest.param("facets", marks=pytest.mark.long), "nurbs_fe"])
 def test_newton_is_quadratic_in_every_step_of_the_steel_chain_at_level_1(tmp_path, monkeypatch, surface):
     solves = record_errors(monkeypatch)
     data = parse_yaml(CASE.read_text())

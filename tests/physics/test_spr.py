@@ -105,6 +105,37 @@ def test_linear_fields_are_recovered_exactly_at_every_node(body, sphere_levels, 
         assert np.abs(star - field(pts.x)).max() <= 1e-10 * scale
 
 
+def test_quadratic_fields_are_recovered_exactly_at_every_node_at_order_2():
+    """Triquadratic space on a cut sphere: every vertex fit is a complete quadratic and the
+    nodal values (vertices, edges, faces, centres) are means of fits, so a quadratic stress
+    field sampled at the 2x2x2 Gauss points comes back exactly, at every node and inside
+    every element."""
+    from cgfem.fem.element import HEX27
+
+    solid = build_solid(SphereSpec((0.0, 0.0, 0.0), 1.0))
+    emb = embed(solid, grid_for(solid, H0, 1, OFFSET), degree=4)
+    space = Space.from_embedding(emb, HEX27)
+    assert space.cut.sum() > 100
+    rec = spr.build_recovery(space)
+    vertices = np.unique(space.connectivity[:, :8])
+    assert rec.linear[vertices].all() and set(np.unique(rec.level[vertices])) <= {0, 1}
+    slots, xi, x = sample_positions(space)
+    rng = np.random.default_rng(11)
+    coefs = rng.normal(size=(10, 3, 3))
+    coefs = 0.5 * (coefs + np.swapaxes(coefs, 1, 2))
+
+    def field(p):
+        X, Y, Z = p[:, 0], p[:, 1], p[:, 2]
+        terms = np.stack([np.ones_like(X), X, Y, Z, X * X, Y * Y, Z * Z, X * Y, Y * Z, X * Z], axis=1)
+        return np.einsum("nk,kij->nij", terms, coefs)
+    nodal = spr.recover(rec, field(x))
+    exact = field(space.coordinates)
+    scale = np.abs(exact).max()
+    assert np.abs(nodal - exact).max() <= 1e-9 * scale
+    pts = space.volume_points(emb)
+    assert np.abs(spr.recovered_at(space, nodal, pts.element, pts.xi) - field(pts.x)).max() <= 1e-9 * scale
+
+
 # -- 2 and 3. convergence and effectivity --------------------------------------------------------
 @pytest.fixture(scope="module")
 def convergence(sphere_levels):

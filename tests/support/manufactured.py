@@ -11,6 +11,7 @@ from cgfem.case.model import Body, GridSpec, Material, SolverOptions
 from cgfem.embedding.quadrature import embed, grid_for
 from cgfem.fem import spr
 from cgfem.fem.body import BodyModel
+from cgfem.fem.element import hexahedron
 from cgfem.fem.boundary import BoundaryPoints, WeakDirichlet, body_force_load
 from cgfem.geometry.specs import SphereSpec
 from cgfem.solve.static import System, solve_static
@@ -70,18 +71,28 @@ class CubicField:
 
 
 def solve_manufactured(solid, field: CubicField, h0: float, level: int, offset, E=1.0, nu=0.3,
-                       gamma=0.05, linear="auto", surface="nurbs") -> dict:
-    """Weak Dirichlet ``u = field`` on the whole surface, the balancing body force; returns
-    relative energy and L2 errors, the ZZ estimate and the model size."""
-    emb = embed(solid, grid_for(solid, h0, level, offset), surface)
+                       gamma=0.05, linear="auto", surface="nurbs", order=1, neumann=None) -> dict:
+    """Weak Dirichlet ``u = field`` on the surface, the balancing body force, elements of
+    ``order``; with ``neumann`` (a function of the points (n, 3) -> bool (n,)) the traction
+    ``sigma . n`` of the field instead where it is true. Returns the relative energy and L2
+    errors, the ZZ effectivity and the model size."""
+    element = hexahedron(order)
+    grid = grid_for(solid, h0, level, offset)
+    emb = embed(solid, grid, surface, degree=element.degree)
     body = Body("b", SphereSpec(center=(0.0, 0.0, 0.0), radius=1.0), Material("linear_elastic", E, nu),
                 GridSpec(h0))   # geometry here is unused: the embedding is given
     options = SolverOptions(ghost_penalty=gamma, outer_passes=40, outer_tol=1e-8, linear=linear)
-    model = BodyModel.build(body, emb, [], options, finite=False)
+    model = BodyModel.build(body, emb, [], options, finite=False, element=element)
     el, space = model.elasticity, model.space
     mu, lam = el.mu, el.lam
     model.load[:] = body_force_load(space, el.points, lambda x, y, z: field.body_force(np.stack([x, y, z], -1), mu, lam))
-    surface = BoundaryPoints.of(space, emb.surface, np.ones(emb.surface.w.size, bool))
+    rule = emb.surface
+    loaded = np.zeros(rule.w.size, bool) if neumann is None else np.asarray(neumann(rule.x), bool)
+    if loaded.any():
+        points = BoundaryPoints.of(space, rule, loaded)
+        traction = np.einsum("pij,pj->pi", field.stress(points.points.x, mu, lam), points.normal)
+        points.integrate(space, traction, model.load)
+    surface = BoundaryPoints.of(space, rule, ~loaded)
     comps = tuple((i, (lambda i: lambda x, y, z: field.value(np.stack([x, y, z], -1))[:, i])(i)) for i in range(3))
     model.dirichlet.append(WeakDirichlet.build("all", space, model.pattern, surface, comps,
                                                10.0 * E / space.h))

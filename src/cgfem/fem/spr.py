@@ -13,10 +13,12 @@ superconvergent points), complete quadratic fits. Cut elements are sampled too, 
 point lies in the material or not (the FE stress is a polynomial on the whole cube); all
 samples weigh the same.
 
-Patches. A vertex's patch is the active elements sharing it, enlarged ring by ring while the
-fit is ill posed (too few samples or degenerate ones) or extrapolates too much; see
-:mod:`cgfem.fem._spr_kernels` for the exact rule (a constant fallback when nothing is well
-posed within two enlargements).
+Patches. Order 1: a vertex's patch is the active elements sharing it, enlarged ring by ring
+while the fit is ill posed (too few samples or degenerate ones) or extrapolates too much (a
+constant fallback when nothing is well posed within two enlargements). Order 2: of the
+elements sharing the vertex and those with one ring more, the well-posed patch whose nodal
+value has the smaller Lebesgue constant (:data:`PATCH_RULE`). See
+:mod:`cgfem.fem._spr_kernels` for the exact rule.
 
 Nodal values. ZZ's averaging: ``sigma*_a`` is the mean, over the vertices ``b`` of the elements
 holding node ``a``, of ``b``'s patch polynomial at ``x_a``. At boundary nodes this blends
@@ -36,11 +38,16 @@ from cgfem.fem._spr_kernels import average_rows, patch_operators
 from cgfem.fem.space import ElementPoints, Space
 from cgfem.quadrature_rules import tensor_gauss
 
-#: patch enlargements tried before the constant fallback
+#: patch enlargements tried before the constant fallback (order 1)
 MAX_LEVEL = 2
 #: largest accepted Lebesgue constant ``sum_s |C_s[0]|`` of a node's own fit (a guard: a
 #: one-sided fit over a level-0 patch of grid-centre samples stays below 3.1)
 MAX_LEBESGUE = 4.0
+#: the patch rule of each element order, ``(max_level, max_lebesgue)``: order 2 takes, of its
+#: vertex's elements and of those and one ring more, the well-posed patch whose nodal value has
+#: the smaller Lebesgue constant (no level is "accepted" below a Lebesgue constant of 0); see
+#: docs/methods/elasticity.md, "Recovery at order 2"
+PATCH_RULE = {1: (MAX_LEVEL, MAX_LEBESGUE), 2: (1, 0.0)}
 #: smallest eigenvalue of the scaled normal matrix ``G / n`` of a well-posed fit
 MIN_EIG = 1e-6
 
@@ -102,7 +109,7 @@ def build_recovery(space: Space) -> Recovery:
     vertex[space.connectivity[:, :8]] = True
     row_ptr, cols, coef, level, linear = patch_operators(
         conn, coords, node_ptr, elements, sample_ptr, x, h,
-        MAX_LEVEL, MAX_LEBESGUE, MIN_EIG, fit_terms(space), vertex)
+        *PATCH_RULE[space.element.order], MIN_EIG, fit_terms(space), vertex)
     indptr, indices, data = average_rows(row_ptr, cols, coef, linear, vertex, coords, h, conn,
                                          node_ptr, elements, slots.size)
     matrix = sp.csr_matrix((data, indices, indptr), shape=(space.n_nodes, slots.size))
