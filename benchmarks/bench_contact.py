@@ -209,7 +209,7 @@ def build_system(level: int, definition: str):
     """The system ``cgfem run`` builds for chain2_steel (bodies, contact pairs, System)."""
     from cgfem.case.load import load_case
     from cgfem.run import build_bodies, build_pairs
-    from cgfem.solve.static import System
+    from cgfem.solve.system import System
 
     case = load_case(CASE)
     models, _, solids = build_bodies(case, level, definition, lambda m: None)
@@ -240,7 +240,7 @@ def contact_state(system) -> np.ndarray:
 def part_iteration(level: int, definition: str, repeat: int) -> dict:
     import scipy.sparse as sp
 
-    from cgfem.solve.linear import choose_backend, factorize
+    from cgfem.solve.backends import choose_backend, factorize
 
     tic = time.perf_counter()
     system = build_system(level, definition)

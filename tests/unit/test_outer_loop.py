@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cgfem.solve.newton import NewtonResult
-from cgfem.solve.static import Relaxation, newton_pass
+from cgfem.solve.outer import Relaxation, newton_pass
 
 
 @pytest.mark.parametrize("a", [0.6, -0.5, 0.2])

@@ -60,7 +60,7 @@ def test_reduced_solve_equals_direct(symmetric, preconditioner):
 def test_auto_reduces_saddle_points_above_the_direct_limit(monkeypatch, symmetric):
     """Above SADDLE_DIRECT_DOFS ``auto`` solves on the bodies' dofs, preconditioned by the
     backend the bodies' matrix alone would get, to the direct solution."""
-    from cgfem.solve import linear
+    from cgfem.solve import backends as linear
     A, b, n_u, c = _system(symmetric)
     monkeypatch.setattr(linear, "SADDLE_DIRECT_DOFS", 100)
     solver = linear.factorize(A, symmetric=symmetric, indefinite=True, saddle=(n_u, [c]))
