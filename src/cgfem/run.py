@@ -37,6 +37,7 @@ from cgfem.geometry.measure import areas_by_name, volume
 from cgfem.results import clear_previous, write_json_atomic, write_step
 from cgfem.solve.linear import available_backends, mkl_threads
 from cgfem.solve.static import StepRecord, solve_static
+from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
 from cgfem.solve.system import System
 
 #: bytes per inside and per cut element: pattern scatter map, quadrature, tangent data and
@@ -289,8 +290,9 @@ def _remove_created(created: list[Path]) -> None:
 
 
 def run_case(case: Case, level: int, surface: str, out: Path,
-             log: Callable[[str], None] = lambda m: None) -> RunStatus:
-    """Solve ``case`` and write its results to ``out``.
+             log: Callable[[str], None] = lambda m: None, policy: SolverPolicy = DEFAULT_POLICY) -> RunStatus:
+    """Solve ``case`` and write its results to ``out``; ``policy``: the solver's tuning
+    (:class:`~cgfem.solve.policy.SolverPolicy`).
 
     Returns the run status (``converged``, ``outer_not_converged`` or ``failed``, see
     :mod:`cgfem.solve.static`; :data:`INTERRUPTED` when ``log`` raised
@@ -330,7 +332,7 @@ def run_case(case: Case, level: int, surface: str, out: Path,
             "versions": {"cgfem": __version__, "python": platform.python_version(), "numpy": np.__version__}})
 
     try:
-        system = System(models, build_pairs(case, models, solids, surface, log))
+        system = System(models, build_pairs(case, models, solids, surface, log), policy)
         views = [BoundaryView.of(m, solids[m.name]) for m in models]
 
         def on_step(record: StepRecord) -> None:

@@ -99,6 +99,42 @@ class Relaxation:
         return [f + self.omega * (r - f) for r, f in zip(recovered, frozen)]
 
 
+class Anderson:
+    """Anderson acceleration (type II, mixing 1) of the fixed point ``P* -> recover(u(P*))``
+    over the last ``depth`` passes: with ``x_k`` the frozen stress of pass ``k``,
+    ``g_k = recover(u(x_k))`` and ``f_k = g_k - x_k``, the next frozen stress is
+    ``x_{k+1} = g_k - dG gamma`` with ``gamma`` the least-squares solution of
+    ``dF gamma = f_k`` (``dF``, ``dG``: the differences of the last ``depth + 1`` ``f`` and
+    ``g``). For an affine map of dimension ``d <= depth`` it is exact after ``d + 1`` passes;
+    with ``depth = 1`` it is the secant method (Aitken's factor on the whole residual)."""
+
+    def __init__(self, depth: int = 3):
+        self.depth = max(1, int(depth))
+        self._f: list[np.ndarray] = []
+        self._g: list[np.ndarray] = []
+
+    def next(self, frozen: list[np.ndarray | None], recovered: list[np.ndarray]) -> list[np.ndarray]:
+        """The frozen stress of the next pass (the recovery itself while nothing was frozen)."""
+        if any(f is None for f in frozen):
+            return recovered
+        g = np.concatenate([r.ravel() for r in recovered])
+        f = g - np.concatenate([x.ravel() for x in frozen])
+        self._f.append(f)
+        self._g.append(g)
+        del self._f[:-self.depth - 1], self._g[:-self.depth - 1]
+        if len(self._f) < 2:
+            return recovered
+        dF = np.column_stack([b - a for a, b in zip(self._f[:-1], self._f[1:])])
+        dG = np.column_stack([b - a for a, b in zip(self._g[:-1], self._g[1:])])
+        gamma = np.linalg.lstsq(dF, f, rcond=1e-12)[0]
+        x = g - dG @ gamma
+        out, start = [], 0
+        for r in recovered:
+            out.append(x[start:start + r.size].reshape(r.shape))
+            start += r.size
+        return out
+
+
 def newton_pass(attempt: Callable[[np.ndarray, bool], NewtonResult], u: np.ndarray,
                 modified_first: bool) -> tuple[NewtonResult, list[float]]:
     """One outer pass's Newton solve from ``u``: ``attempt(start, fixed_tangent)`` runs
@@ -123,17 +159,21 @@ def newton_pass(attempt: Callable[[np.ndarray, bool], NewtonResult], u: np.ndarr
     return result, list(result.residuals)
 
 
-def accelerator(policy):
+def accelerator(policy) -> Relaxation | Anderson:
     """The outer loop's fixed-point acceleration the policy names."""
+    if policy.acceleration == "anderson":
+        return Anderson(policy.anderson_depth)
     return Relaxation(policy.acceleration == "aitken")
 
 
 def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray | None], t: float,
-                    options: SolverOptions, log: Log) -> Increment | IncrementFailure:
+                    options: SolverOptions, log: Log, start: np.ndarray | None = None
+                    ) -> Increment | IncrementFailure:
     """The outer loop at load factor ``t`` from the unknowns ``u0`` and the recovery
     ``recovered0`` of the previous step (module docstring): an :class:`Increment`, or an
     :class:`IncrementFailure` when Newton fails. ``solves``: the linear solves
-    (:class:`~cgfem.solve.solves.LinearSolves`)."""
+    (:class:`~cgfem.solve.solves.LinearSolves`); ``start``: the unknowns the first pass
+    starts from (a predictor), ``u0`` if None."""
     policy = system.policy
     u, frozen, recovered = u0, list(recovered0), list(recovered0)
     changes: list[float] = []
@@ -148,7 +188,11 @@ def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray 
     contact = system.contact
     active = contact.active()
     settled = True
+    if start is not None:
+        u = start
     for outer in range(1, options.outer_passes + 1):
+        # a pass that is not the last needs Newton only to a fraction of its first residual
+        loose = policy.pass_tolerance if (outer == 1 or changes[-1] > 100.0 * options.outer_tol) else 0.0
         frozen = following
         system.freeze(frozen)
         if contact:
@@ -172,12 +216,14 @@ def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray 
                 return newton(assemble, start, solves, tol=options.newton_tol, reference=reference,
                               max_iter=policy.modified_newton_iterations if fixed_tangent else options.max_newton,
                               fixed_tangent=fixed_tangent, limit=limit, forcing=policy.forcing,
+                              forcing_max=policy.forcing_max, loose=loose,
                               log=lambda k, r, note: log(f"t={t:.4g} pass {outer} newton {k}: |r|/ref={r:.3e}  "
                                                          f"({time.perf_counter() - tic:.2f} s"
                                                          f"{'; ' + note if note else ''})"))
             finally:
                 solves.frozen = False
-        result, history = newton_pass(attempt, u, modified_first=outer > 1 and not system.linear)
+        modified = outer > 1 and not system.linear and policy.modified_newton_iterations > 0 and solves.factorizes
+        result, history = newton_pass(attempt, u, modified_first=modified)
         if not result.converged:
             log(f"t={t:.4g}: Newton stopped ({result.reason})")
             last = result.residuals[-1] / result.reference if result.reference > 0.0 else float("nan")
@@ -192,11 +238,12 @@ def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray 
             previous, active = active, contact.active()
             switched = active_changes(active, previous)
             contradicted = contact.contradicted()
-            settled = outer > 1 and switched == 0 and contradicted == 0
+            settled = outer > 1 and switched == 0 and contradicted == 0 and result.tight
             held = f", {contradicted} held against their rule" if contradicted else ""
             log(f"t={t:.4g} pass {outer}: recovered stress changed by {changes[-1]:.3e}, "
                 f"{int(sum(a.sum() for a in active))} active contact points ({switched} switched{held})")
         else:
+            settled = result.tight
             log(f"t={t:.4g} pass {outer}: recovered stress changed by {changes[-1]:.3e}")
         if changes[-1] <= options.outer_tol and settled:
             break

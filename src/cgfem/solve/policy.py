@@ -22,9 +22,17 @@ class SolverPolicy:
     Newton and the outer loop
     -------------------------
     modified_newton_iterations : iterations allowed to modified Newton (the last
-        factorization or preconditioner kept) in outer passes after the first.
+        factorization kept) in outer passes after the first, on the direct path only (a Krylov
+        solve with an old matrix costs as much as with a new one); 0: full Newton always.
     forcing : inexact Newton's forcing factor ``f``: an iterative linear solve stops at the
         relative residual ``f * newton_tol * reference / |r|`` (at most ``f``).
+    forcing_max : inexact Newton may also stop a linear solve at ``min(forcing_max, |r| /
+        reference)`` where that is looser (0: off).
+    pass_tolerance : an outer pass that is not the last (the recovered stress still changing by
+        more than ``100 outer_tol``) stops Newton at ``pass_tolerance`` times its first residual,
+        or at ``newton_tol`` if that is reached first (0: every pass to ``newton_tol``).
+    predictor : the start of a load increment: ``"none"`` (the last converged state) or
+        ``"secant"`` (extrapolated linearly in the load factor from the last two).
     acceleration : the outer loop's fixed-point acceleration of the frozen recovered stress
         (and ``p_N`` with it): ``"aitken"`` (Irons-Tuck dynamic relaxation), ``"anderson"``
         (Anderson mixing of depth :attr:`anderson_depth`) or ``"none"`` (plain substitution).
@@ -65,6 +73,9 @@ class SolverPolicy:
 
     modified_newton_iterations: int = 6
     forcing: float = 0.1
+    forcing_max: float = 0.0
+    pass_tolerance: float = 0.0
+    predictor: str = "none"
     acceleration: str = "aitken"
     anderson_depth: int = 3
     free_mode: float = 1e-10
@@ -83,9 +94,9 @@ class SolverPolicy:
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
-            if f.name == "acceleration":
-                if value not in ACCELERATIONS:
-                    raise ValueError(f"acceleration must be one of {', '.join(ACCELERATIONS)}, got {value!r}")
+            if f.name in CHOICES:
+                if value not in CHOICES[f.name]:
+                    raise ValueError(f"{f.name} must be one of {', '.join(CHOICES[f.name])}, got {value!r}")
             elif isinstance(value, bool) or not isinstance(value, (int, float)) or math.isnan(value) \
                     or value < 0:
                 raise ValueError(f"{f.name} must be a number >= 0, got {value!r}")
@@ -93,7 +104,7 @@ class SolverPolicy:
             raise ValueError(f"damping_max must be >= 1, got {self.damping_max!r}")
 
 
-#: the outer loop's fixed-point accelerations (:attr:`SolverPolicy.acceleration`)
-ACCELERATIONS = ("aitken", "anderson", "none")
+#: the values of the policy's named choices
+CHOICES = {"acceleration": ("aitken", "anderson", "none"), "predictor": ("none", "secant")}
 
 DEFAULT_POLICY = SolverPolicy()

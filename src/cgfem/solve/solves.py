@@ -29,6 +29,7 @@ import scipy.sparse as sp
 
 from cgfem.solve.backends import choose_backend, factorize
 from cgfem.solve.krylov import AMGPreconditioner, krylov_solve
+from cgfem.solve.linear import LinearSolverError
 from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
 
 DIRECT, KRYLOV = "direct", "krylov"
@@ -55,6 +56,7 @@ class LinearSolves:
         self._amg: AMGPreconditioner | None = None
         self._fresh = False
         self._logged = False
+        self._n = None
         #: per solve: (path, iterations, what happened) for the benchmarks and the tests
         self.history: list[tuple[str, int, str]] = []
 
@@ -63,8 +65,17 @@ class LinearSolves:
         """The solves of ``system``'s matrices with the case's ``backend``; ``ValueError`` if
         that backend cannot solve them."""
         choose_backend(system.n_dofs, system.symmetric, backend, system.indefinite)
-        return cls(backend, system.near_null(), system.symmetric, system.indefinite, system.saddle(),
-                   system.policy, log)
+        solves = cls(backend, system.near_null(), system.symmetric, system.indefinite, system.saddle(),
+                     system.policy, log)
+        solves._n = system.n_dofs
+        return solves
+
+    @property
+    def factorizes(self) -> bool:
+        """Whether the matrices are factorized (the direct path), so that modified Newton's
+        solves with a kept factorization are cheap; on the Krylov path a solve with the last
+        matrix costs as much as one with a new matrix, and full Newton converges faster."""
+        return self._n is None or self.path(self._n) == DIRECT
 
     def path(self, n: int) -> str:
         """:data:`KRYLOV` for ``auto`` on a system of at least ``policy.krylov_min_dofs``
@@ -76,7 +87,7 @@ class LinearSolves:
     def __call__(self, K: sp.csr_matrix | None, b: np.ndarray, rtol: float | None = None) -> np.ndarray:
         """The solution of ``K x = b``; ``rtol``: the relative residual an iterative solve may
         stop at (inexact Newton). ``K`` None (modified Newton): the last matrix."""
-        n = b.shape[0]
+        n = self._n = b.shape[0]
         if self.path(n) == KRYLOV:
             return self._krylov(K, b, rtol)
         if self._key is not K and not (self.frozen and self._factor is not None):
@@ -104,17 +115,24 @@ class LinearSolves:
         kind = "cg" if self.symmetric else "gmres"
         tic = time.perf_counter()
         note = "kept"
-        if self._amg is None:
-            self._refresh(K)
-            note = "new"
-        x, its, res, ok = krylov_solve(K, b, self._amg, target,
-                                       p.krylov_max_iterations if self._fresh else p.krylov_refresh, self.symmetric)
-        total = its
-        if not ok and not self._fresh:
-            self._refresh(K)
-            note = f"refreshed after {its}"
-            x, its, res, ok = krylov_solve(K, b, self._amg, target, p.krylov_max_iterations, self.symmetric, x0=x)
-            total += its
+        total, res, ok = 0, float("nan"), False
+        try:
+            if self._amg is None:
+                self._refresh(K)
+                note = "new"
+            x, its, res, ok = krylov_solve(K, b, self._amg, target,
+                                           p.krylov_max_iterations if self._fresh else p.krylov_refresh,
+                                           self.symmetric)
+            total = its
+            if not ok and not self._fresh:
+                self._refresh(K)
+                note = f"refreshed after {its}"
+                x, its, res, ok = krylov_solve(K, b, self._amg, target, p.krylov_max_iterations, self.symmetric,
+                                               x0=x)
+                total += its
+        except LinearSolverError as err:      # a breakdown (an indefinite matrix for CG), NaN
+            self._amg, ok = None, False
+            note = str(err)
         if ok:
             self.history.append((KRYLOV, total, note))
             self.log(f"linear: {kind} {total} iterations to {res:.1e} (target {target:.1e}; preconditioner "
@@ -122,7 +140,7 @@ class LinearSolves:
             return x
         self._factor = factorize(K, backend=choose_backend(b.shape[0], self.symmetric), symmetric=self.symmetric)
         self.history.append((DIRECT, total, "fallback"))
-        self.log(f"linear: {kind} stalled at {res:.1e} after {total} iterations (target {target:.1e}); "
+        self.log(f"linear: {kind} stalled at {res:.1e} after {total} iterations (target {target:.1e}; {note}); "
                  f"fell back to {self._factor.backend} for this matrix")
         return self._factor.solve(b)
 

@@ -114,6 +114,17 @@ class StepControl:
         return True
 
 
+def predict(kind: str, t: float, u: np.ndarray, last: tuple[float, np.ndarray] | None,
+            t_new: float) -> np.ndarray | None:
+    """The start of the increment from ``(t, u)`` to ``t_new``: None (``u`` itself) for
+    ``"none"`` or without an earlier state; for ``"secant"`` the line through the earlier
+    converged state ``last = (t_0, u_0)`` and ``(t, u)`` at ``t_new``."""
+    if kind != "secant" or last is None or not t > last[0]:
+        return None
+    t0, u0 = last
+    return u + (t_new - t) / (t - t0) * (u - u0)
+
+
 def solve_static(system: System, steps: int, options: SolverOptions, log: Log | None = None,
                  on_step: Callable[[StepRecord], None] | None = None) -> StaticResult:
     """Run the load steps; ``on_step`` is called after every converged (sub)step.
@@ -127,9 +138,11 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
     u = np.zeros(system.n_dofs)
     recovered: list[np.ndarray | None] = [None] * len(system.bodies)
     control, records = StepControl(steps, options.max_cutbacks), []
+    t, last = 0.0, None                                     # the converged state before (t, u)
     while (t_new := control.next()) is not None:
         start = time.perf_counter()
-        outcome = solve_increment(system, solves, u, recovered, t_new, options, log)
+        guess = predict(system.policy.predictor, t, u, last, t_new)
+        outcome = solve_increment(system, solves, u, recovered, t_new, options, log, guess)
         if isinstance(outcome, IncrementFailure):
             if not control.cut_back():
                 return StaticResult(FAILED, records, f"no convergence at load factor {t_new:.6g} "
@@ -137,6 +150,7 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
                                     outcome)
             log(f"cut-back {control.cutbacks}: load increment {control.size:.4g}")
             continue
+        last = (t, u)
         u, recovered = outcome.u, outcome.recovered
         control.accept(t_new)
         t = t_new
