@@ -216,7 +216,7 @@ def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray 
                 return newton(assemble, start, solves, tol=options.newton_tol, reference=reference,
                               max_iter=policy.modified_newton_iterations if fixed_tangent else options.max_newton,
                               fixed_tangent=fixed_tangent, limit=limit, forcing=policy.forcing,
-                              forcing_max=policy.forcing_max, loose=loose,
+                              forcing_max=0.0 if solves.factorizes else policy.forcing_max, loose=loose,
                               log=lambda k, r, note: log(f"t={t:.4g} pass {outer} newton {k}: |r|/ref={r:.3e}  "
                                                          f"({time.perf_counter() - tic:.2f} s"
                                                          f"{'; ' + note if note else ''})"))

@@ -4,9 +4,10 @@
 that a case file does not set (those are :class:`~cgfem.case.model.SolverOptions`). The
 defaults are the measured values; why each has its value is in ``docs/methods/elasticity.md``
 ("The outer loop", "Newton", "Linear solvers") and ``docs/methods/contact.md`` ("Contact
-onset", "Bodies held by contact alone"). Tests and benchmarks build a policy with other values
-(``dataclasses.replace(DEFAULT_POLICY, onset_penetration=math.inf)``) and pass it to
-:func:`~cgfem.solve.static.solve_static` instead of patching module globals.
+onset", "Bodies held by contact alone"). The system carries its policy
+(:class:`~cgfem.solve.system.System`, ``run_case(..., policy=...)``): tests and benchmarks build
+one with other values (``dataclasses.replace(DEFAULT_POLICY, onset_penetration=math.inf)``)
+instead of patching module globals.
 """
 
 from __future__ import annotations
@@ -26,8 +27,8 @@ class SolverPolicy:
         solve with an old matrix costs as much as with a new one); 0: full Newton always.
     forcing : inexact Newton's forcing factor ``f``: an iterative linear solve stops at the
         relative residual ``f * newton_tol * reference / |r|`` (at most ``f``).
-    forcing_max : inexact Newton may also stop a linear solve at ``min(forcing_max, |r| /
-        reference)`` where that is looser (0: off).
+    forcing_max : on the Krylov path inexact Newton may also stop a linear solve at
+        ``min(forcing_max, |r| / reference)`` where that is looser (0: off).
     pass_tolerance : an outer pass that is not the last (the recovered stress still changing by
         more than ``100 outer_tol``) stops Newton at ``pass_tolerance`` times its first residual,
         or at ``newton_tol`` if that is reached first (0: every pass to ``newton_tol``).
@@ -59,10 +60,9 @@ class SolverPolicy:
 
     Linear solves (:class:`~cgfem.solve.solves.LinearSolves`)
     ----------------------------------------------------------
-    krylov_min_dofs : ``linear: auto`` solves a system with contact (or a non-symmetric one)
-        of at least this many unknowns by the preconditioned Krylov path, smaller ones by a
-        direct factorization (symmetric systems without contact keep
-        :data:`~cgfem.solve.linear.PARDISO_MAX_DOFS`).
+    krylov_min_dofs : ``linear: auto`` solves a system of at least this many unknowns that is
+        not a saddle point by the preconditioned Krylov path, smaller ones by the direct path
+        (:mod:`cgfem.solve.backends`).
     krylov_refresh : a Krylov solve that needs more than this many iterations with a kept
         preconditioner is repeated with a preconditioner of the current matrix.
     krylov_max_iterations : iterations after which a Krylov solve with a fresh
@@ -73,7 +73,7 @@ class SolverPolicy:
 
     modified_newton_iterations: int = 6
     forcing: float = 0.1
-    forcing_max: float = 0.0
+    forcing_max: float = 1e-3
     pass_tolerance: float = 0.0
     predictor: str = "none"
     acceleration: str = "aitken"
@@ -86,7 +86,7 @@ class SolverPolicy:
     damping_above: float = 1e-2
     damping_max: float = 1e6
     onset_penetration: float = 0.1
-    krylov_min_dofs: int = 10**12
+    krylov_min_dofs: int = 100_000
     krylov_refresh: int = 40
     krylov_max_iterations: int = 400
     krylov_rtol: float = 1e-10
