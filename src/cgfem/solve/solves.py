@@ -29,6 +29,7 @@ import scipy.sparse as sp
 
 from cgfem.solve.backends import choose_backend, factorize
 from cgfem.solve.krylov import AMGPreconditioner, krylov_solve
+from cgfem.solve import linear
 from cgfem.solve.linear import LinearSolverError
 from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
 
@@ -138,7 +139,8 @@ class LinearSolves:
             self.log(f"linear: {kind} {total} iterations to {res:.1e} (target {target:.1e}; preconditioner "
                      f"{note}; {time.perf_counter() - tic:.2f} s)")
             return x
-        self._factor = factorize(K, backend=choose_backend(b.shape[0], self.symmetric), symmetric=self.symmetric)
+        direct = "pardiso" if "pardiso" in linear.available_backends() else "superlu"
+        self._factor = factorize(K, backend=direct, symmetric=self.symmetric)
         self.history.append((DIRECT, total, "fallback"))
         self.log(f"linear: {kind} stalled at {res:.1e} after {total} iterations (target {target:.1e}; {note}); "
                  f"fell back to {self._factor.backend} for this matrix")
