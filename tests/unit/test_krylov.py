@@ -132,3 +132,18 @@ def test_direct_below_the_size_threshold_and_for_saddle_points():
     assert LinearSolves("auto", B, policy=policy()).path(n) == KRYLOV
     assert LinearSolves("auto", B, indefinite=True, policy=policy()).path(n) == DIRECT
     assert LinearSolves("superlu", B, policy=policy()).path(n) == DIRECT
+
+
+def test_per_body_modes_collapse_to_six_columns_with_the_same_span_per_body():
+    """Two bodies' modes (n, 12), block by block, become (n, 6) whose rows on each body are
+    that body's own modes; columns that mix bodies in a row are left alone."""
+    from cgfem.solve.krylov import collapse_modes
+    _, _, B = two_bodies(True)
+    C = collapse_modes(B)
+    n1 = B.shape[0] // 2
+    assert C.shape == (B.shape[0], 6)
+    np.testing.assert_array_equal(C[:n1], B[:n1, :6])
+    np.testing.assert_array_equal(C[n1:], B[n1:, 6:])
+    mixed = B.copy()
+    mixed[0, 7] = 1.0
+    assert collapse_modes(mixed) is mixed and collapse_modes(B[:, :6]).shape == (B.shape[0], 6)

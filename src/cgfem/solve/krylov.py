@@ -30,10 +30,24 @@ from cgfem.solve.linear import LinearSolverError
 RESTART = 50
 
 
+def collapse_modes(B: np.ndarray) -> np.ndarray:
+    """The rigid-body modes of several bodies, ``B`` (n, 6 k) block by block (each row
+    nonzero in one group of six columns at most), summed into six columns (n, 6): every
+    aggregate lies in one body, where both span the same motions, and the coarse blocks are
+    6x6 instead of 6k x 6k. Other shapes are returned as they are."""
+    n, k = B.shape
+    if k % 6 or k == 6:
+        return B
+    groups = np.abs(B).reshape(n, k // 6, 6).max(axis=2) > 0.0
+    if np.any(groups.sum(axis=1) > 1):
+        return B
+    return B.reshape(n, k // 6, 6).sum(axis=1)
+
+
 class AMGPreconditioner:
     """One V-cycle of smoothed aggregation on ``A`` (n, n), scaled: ``z = s * V(s * r)``
-    with ``s = |diag A|^-1/2``. ``near_null`` (n, k): the rigid-body modes of the bodies
-    (zero rows allowed); ``symmetric``: the hierarchy's restriction is ``P^T`` (CG) or built
+    with ``s = |diag A|^-1/2``. ``near_null`` (n, 6 k): the rigid-body modes of the bodies
+    (zero rows allowed; :func:`collapse_modes`); ``symmetric``: the hierarchy's restriction is ``P^T`` (CG) or built
     for a non-symmetric ``A`` (GMRES). ``info``: ``setup_s``, ``levels``,
     ``operator_complexity``."""
 
@@ -50,7 +64,7 @@ class AMGPreconditioner:
         As = (sp.diags(self._s) @ A @ sp.diags(self._s)).tocsr()
         if symmetric:
             As = (0.5 * (As + As.T)).tocsr()
-        B = None if near_null is None else np.asarray(near_null, float) / self._s[:, None]
+        B = None if near_null is None else collapse_modes(np.asarray(near_null, float)) / self._s[:, None]
         if self.n % 3 == 0:
             As = As.tobsr(blocksize=(3, 3))
         kwargs = {"improve_candidates": None} if B is not None else {}
