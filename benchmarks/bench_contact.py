@@ -209,7 +209,7 @@ def build_system(level: int, definition: str):
     """The system ``cgfem run`` builds for chain2_steel (bodies, contact pairs, System)."""
     from cgfem.case.load import load_case
     from cgfem.run import build_bodies, build_pairs
-    from cgfem.solve.static import System
+    from cgfem.solve.system import System
 
     case = load_case(CASE)
     models, _, solids = build_bodies(case, level, definition, lambda m: None)
@@ -240,7 +240,7 @@ def contact_state(system) -> np.ndarray:
 def part_iteration(level: int, definition: str, repeat: int) -> dict:
     import scipy.sparse as sp
 
-    from cgfem.solve.linear import choose_backend, factorize
+    from cgfem.solve.backends import choose_backend, factorize
 
     tic = time.perf_counter()
     system = build_system(level, definition)
@@ -354,11 +354,11 @@ RUN_TIMERS = (
     ("model build", "cgfem.fem.body", "BodyModel", "build"),
     ("contact setup", "cgfem.run", None, "build_pairs"),
     ("bulk assembly", "cgfem.fem.body", "BodyModel", "assemble"),
-    ("bulk assembly", "cgfem.solve.static", "System", "force_scale"),
-    ("stacking + Kc", "cgfem.solve.static", "System", "assemble"),
+    ("bulk assembly", "cgfem.solve.system", "System", "force_scale"),
+    ("stacking + Kc", "cgfem.solve.system", "System", "assemble"),
     ("contact R+K", "cgfem.contact.assembly", "ContactSet", "add"),
     ("contact freeze", "cgfem.contact.assembly", "ContactSet", "freeze"),
-    ("linear solve", "cgfem.solve.static", "_Solver", "__call__"),
+    ("linear solve", "cgfem.solve.solves", "LinearSolves", "__call__"),
     ("SPR recovery", "cgfem.fem.body", "BodyModel", "recover"),
     ("step output", "cgfem.run", None, "_write_step"),
 )

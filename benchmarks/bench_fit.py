@@ -50,7 +50,7 @@ def one_run(level: int, surface: str, folder: Path, first_step: bool = False, ve
     progress log on stderr."""
     import resource
 
-    import cgfem.solve.static as static
+    import cgfem.solve.solves as static
     from cgfem.case.load import load_case
     from cgfem.run import run_case
 

@@ -35,7 +35,8 @@ def run_one(backend: str, n: int) -> dict:
     """Time one backend on the n^3 cube (runs in the child process)."""
     from tests.support import elasticity_fixture as fx
 
-    from cgfem.solve.linear import factorize, rigid_body_modes
+    from cgfem.solve.backends import factorize
+    from cgfem.solve.linear import rigid_body_modes
 
     Kw, fw, _ = fx.clamped_cube(2)  # warm-up: imports, MKL start-up, first-call costs
     factorize(Kw, backend=backend).solve(fw)

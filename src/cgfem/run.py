@@ -37,7 +37,9 @@ from cgfem.geometry.builders import build_solid
 from cgfem.geometry.measure import areas_by_name, volume
 from cgfem.results import clear_previous, write_json_atomic, write_step
 from cgfem.solve.linear import available_backends, mkl_threads
-from cgfem.solve.static import StepRecord, System, solve_static
+from cgfem.solve.static import StepRecord, solve_static
+from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
+from cgfem.solve.system import System
 
 #: bytes per inside and per cut trilinear element: pattern scatter map, quadrature, tangent
 #: data and the factorization's fill (calibrated on the Neo-Hookean half torus at level 3 with
@@ -300,8 +302,10 @@ def _remove_created(created: list[Path]) -> None:
 
 
 def run_case(case: Case, level: int, surface: str, out: Path,
-             log: Callable[[str], None] = lambda m: None, order: int = 1) -> RunStatus:
-    """Solve ``case`` with the hexahedra of ``order`` (1 or 2) and write its results to ``out``.
+             log: Callable[[str], None] = lambda m: None, order: int = 1,
+             policy: SolverPolicy = DEFAULT_POLICY) -> RunStatus:
+    """Solve ``case`` with the hexahedra of ``order`` (1 or 2) and write its results to ``out``;
+    ``policy``: the solver's tuning (:class:`~cgfem.solve.policy.SolverPolicy`).
 
     Returns the run status (``converged``, ``outer_not_converged`` or ``failed``, see
     :mod:`cgfem.solve.static`; :data:`INTERRUPTED` when ``log`` raised
@@ -345,7 +349,7 @@ def run_case(case: Case, level: int, surface: str, out: Path,
             "versions": {"cgfem": __version__, "python": platform.python_version(), "numpy": np.__version__}})
 
     try:
-        system = System(models, build_pairs(case, models, solids, surface, log))
+        system = System(models, build_pairs(case, models, solids, surface, log), policy)
         views = [BoundaryView.of(m, solids[m.name]) for m in models]
 
         def on_step(record: StepRecord) -> None:
@@ -388,13 +392,15 @@ def _write_fits(out: Path, system: System, record: StepRecord, number: int) -> d
 def _floating_summary(system: System, record: StepRecord, unknowns: np.ndarray) -> dict:
     """Per body held by contact alone in some rigid motion: how many rigid motions its own
     conditions leave free, the stabilizing force (the norm of the force the tangent shift put
-    into the increment's last Newton step, :attr:`~cgfem.solve.static.System.stabilizing`; the
+    into the increment's last Newton step, :attr:`~cgfem.solve.floating.FloatingBodies.stabilizing`; the
     residual never carries it) and the norm of the force its equations leave unbalanced at the
     converged state (N), to compare with the contact force."""
-    r = system.split(system.assemble(unknowns, record.load_factor, record.frozen_stress, False)[0])
-    return {system.bodies[i].name: {"free_modes": system.free_modes.get(i, 0),
-                                    "stabilizing_force": system.stabilizing.get(i, 0.0),
-                                    "residual": float(np.linalg.norm(r[i]))} for i in system.floating}
+    system.freeze(record.frozen_stress)
+    r = system.split(system.assemble(unknowns, record.load_factor, False)[0])
+    floating = system.floating
+    return {system.bodies[i].name: {"free_modes": floating.free_modes.get(i, 0),
+                                    "stabilizing_force": floating.stabilizing.get(i, 0.0),
+                                    "residual": float(np.linalg.norm(r[i]))} for i in floating.bodies}
 
 
 def _write_step(out: Path, system: System, record: StepRecord, number: int,
@@ -414,7 +420,7 @@ def _write_step(out: Path, system: System, record: StepRecord, number: int,
         # extension of a kept master element or triangle, extended_hits = 0)
         contact["extended_hits"] = record.extended_hits
         contact["continuous_residual"] = record.continuous_residual
-        if system.floating:
+        if system.floating.bodies:
             contact["floating"] = _floating_summary(system, record, unknowns)
     outputs = [step_outputs(m, u, s, v) for m, u, s, v in zip(models, record.u, record.recovered, views)]
     write_step(out, number, outputs)

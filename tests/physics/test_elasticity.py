@@ -15,7 +15,8 @@ from cgfem.geometry.builders import build_solid
 from cgfem.geometry.specs import SphereSpec
 from cgfem.run import build_models
 from cgfem.solve.linear import rigid_body_modes
-from cgfem.solve.static import System, solve_static
+from cgfem.solve.static import solve_static
+from cgfem.solve.system import System
 from tests.support.elasticity_cases import box_case, uniform_stress_case
 from tests.support.newton import record_errors
 
@@ -220,9 +221,11 @@ def test_cut_back_reaches_the_step_in_equal_sub_steps(monkeypatch):
     taken in sub-steps of that size (not ever smaller ones)."""
     import cgfem.solve.static as static
     from cgfem.case.model import SolverOptions
+    from cgfem.solve.outer import Increment, IncrementFailure
+    from cgfem.solve.policy import SolverPolicy
 
     class OneDof:
-        n_dofs, symmetric, indefinite, bodies = 1, True, False, [None]
+        n_dofs, symmetric, indefinite, bodies, policy = 1, True, False, [None], SolverPolicy()
 
         def split(self, u):
             return [u]
@@ -235,17 +238,19 @@ def test_cut_back_reaches_the_step_in_equal_sub_steps(monkeypatch):
 
     taken = []
 
-    def increment(system, solver, u, stress, t, options, log):
+    def increment(system, solves, u, stress, t, options, log, guess=None):
         if t - (taken[-1] if taken else 0.0) > 0.3:
-            return "Newton stopped"           # too large an increment: Newton fails
+            return IncrementFailure("max_iterations", 1, 0.5, 30)   # too large an increment
         taken.append(t)
-        return static.Increment(u, stress, stress, [[1.0, 0.0]], [0.0], True)
+        return Increment(u, stress, stress, [[1.0, 0.0]], [0.0], True)
 
-    monkeypatch.setattr(static, "_solve_increment", increment)
+    monkeypatch.setattr(static, "solve_increment", increment)
     result = static.solve_static(OneDof(), 1, SolverOptions(max_cutbacks=2))
     assert result.status == "converged"
     assert taken == pytest.approx([0.25, 0.5, 0.75, 1.0])
     taken.clear()
     result = static.solve_static(OneDof(), 1, SolverOptions(max_cutbacks=1))
     assert result.status == "failed" and taken == []
-    assert result.message.endswith("after 1 cut-backs (last attempt: Newton stopped)")
+    assert result.failure == IncrementFailure("max_iterations", 1, 0.5, 30)
+    assert result.message.endswith("after 1 cut-backs (last attempt: Newton stopped on max_iterations in "
+                                   "outer pass 1 at |r|/ref = 5.00e-01 after 30 iterations)")

@@ -13,7 +13,10 @@ import scipy.sparse.linalg as spla
 
 from cgfem.case.load import parse_case
 from cgfem.run import build_models
-from cgfem.solve.static import System, solve_static
+from cgfem.solve.static import solve_static
+from cgfem.solve.floating import FloatingBodies, free_rigid_modes, shift_factor
+from cgfem.solve.policy import SolverPolicy
+from cgfem.solve.system import System
 
 
 def _pair(model: str, E_box: float, E_sphere: float):
@@ -45,9 +48,15 @@ def small_pair():
     return _pair("linear_elastic", 2.0e9, 5.0e8)
 
 
+def assemble(system: System, u: np.ndarray, t: float, frozen: list, tangent: bool):
+    """The system's residual and tangent with every body's recovered stress held at ``frozen``."""
+    system.freeze(frozen)
+    return system.assemble(u, t, tangent)
+
+
 def _split_check(system: System, singles: list[System], u: np.ndarray, t: float, frozen: list):
-    r, K = system.assemble(u, t, frozen, True)
-    parts = [s.assemble(ub, t, [f], True) for s, ub, f in zip(singles, system.split(u), frozen)]
+    r, K = assemble(system, u, t, frozen, True)
+    parts = [assemble(s, ub, t, [f], True) for s, ub, f in zip(singles, system.split(u), frozen)]
     # the residual splits, body by body, to the last bit
     assert np.array_equal(r, np.concatenate([p[0] for p in parts]))
     # the tangent is block diagonal and each block is the one-body tangent
@@ -73,7 +82,7 @@ def test_small_strain_pair_is_two_independent_bodies(small_pair):
 
     # the two-body solution of a linear outer pass is the pair of one-body solutions
     def solve(sys_, stress):
-        r, K = sys_.assemble(np.zeros(sys_.n_dofs), 1.0, stress, True)
+        r, K = assemble(sys_, np.zeros(sys_.n_dofs), 1.0, stress, True)
         return spla.spsolve(sp.csc_matrix(K), -r)
 
     u2 = solve(system, [None, None])
@@ -109,12 +118,12 @@ def test_finite_strain_pair_tangent_is_the_derivative_of_the_residual():
     v = rng.normal(size=system.n_dofs)
     v /= np.abs(v).max()
     eps = 1e-6
-    fd = (system.assemble(u + eps * v, 0.8, frozen, False)[0]
-          - system.assemble(u - eps * v, 0.8, frozen, False)[0]) / (2 * eps)
+    fd = (assemble(system, u + eps * v, 0.8, frozen, False)[0]
+          - assemble(system, u - eps * v, 0.8, frozen, False)[0]) / (2 * eps)
     Kv = K @ v
     assert np.linalg.norm(fd - Kv) <= 1e-8 * np.linalg.norm(Kv)   # measured 1e-10
     # the check can fail: the tangent of the wrong material point is far off
-    assert np.linalg.norm(fd - System([box, ball]).assemble(0 * u, 0.8, frozen, True)[1] @ v) \
+    assert np.linalg.norm(fd - assemble(System([box, ball]), 0 * u, 0.8, frozen, True)[1] @ v) \
         > 1e-2 * np.linalg.norm(Kv)
 
 
@@ -132,18 +141,17 @@ def test_free_rigid_modes_of_a_body(components, free):
     case = parse_case(data, Path("."))
     body = build_models(case, 0, "nurbs_fe", lambda message: None)[0][0]
     _, K = body.assemble(np.zeros(body.n_dofs), 1.0, None, True)
-    assert System([body]).free_rigid_modes(0, sp.csr_matrix(K)) == free
+    assert free_rigid_modes(body.space.coordinates, sp.csr_matrix(K), SolverPolicy().free_mode) == free
 
 
 def test_fading_shift_restores_fast_convergence_on_a_soft_mode():
     """A soft mode of stiffness k under a tangent shift s converges at the rate s / (k + s)
     per Newton iteration: with s = 10 k (chain3's middle link at level 2 had k / s ~ 0.09)
     a fixed shift needs over 250 iterations to 1e-12; the shift scaled by shift_factor fades
-    with the residual and gets there in 18 (the floor SHIFT_FLOOR sets the final rate, 1e-3)."""
+    with the residual and gets there in 18 (the policy's shift_floor sets the final rate, 1e-3)."""
     from cgfem.solve.newton import newton
-    from cgfem.solve.static import SHIFT_FLOOR, shift_factor
     assert shift_factor(5.0, 5.0) == 1.0 and shift_factor(1.0, 0.0) == 1.0
-    assert shift_factor(1e-3, 1.0) == pytest.approx(1e-3) and shift_factor(1e-9, 1.0) == SHIFT_FLOOR
+    assert shift_factor(1e-3, 1.0) == pytest.approx(1e-3) and shift_factor(1e-9, 1.0) == SolverPolicy().shift_floor
     k, s, f = 1.0, 10.0, 1.0
 
     def solve(fading):
@@ -165,31 +173,32 @@ def test_fading_shift_restores_fast_convergence_on_a_soft_mode():
 
 def test_step_limit_of_a_floating_body_adapts_its_shift():
     """A Newton step moving a body held by contact alone by 10 h is scaled to 1 h
-    (FLOATING_STEP), and the body's tangent shift is raised 10-fold for the next iterations
+    (the policy's floating_step), and the body's tangent shift is raised 10-fold for the next iterations
     (a Levenberg-Marquardt damping of its soft rigid motions); steps within the limit are
-    kept as they are and lower the damping by DAMPING_DECAY, down to 1; near convergence
-    (residual below DAMPING_ABOVE of the increment's largest) a limited step lowers it too."""
-    from cgfem.solve.static import DAMPING_ABOVE, DAMPING_DECAY, FLOATING_STEP
+    kept as they are and lower the damping by damping_decay, down to 1; near convergence
+    (residual below damping_above of the increment's largest) a limited step lowers it too."""
+    policy = SolverPolicy()
+    FLOATING_STEP, DAMPING_DECAY, DAMPING_ABOVE = policy.floating_step, policy.damping_decay, policy.damping_above
     data = {"name": "free", "kinematics": "small", "steps": 1,
             "bodies": {"box": {"geometry": {"builder": "box", "min": [0, 0, 0], "max": [1.0, 0.6, 0.5]},
                                "material": {"model": "linear_elastic", "E": 1e9, "nu": 0.3},
                                "grid": {"h0": 0.25, "offset": [0.13, 0.29, 0.41]}}},
             "boundary": []}
     body = build_models(parse_case(data, Path(".")), 0, "nurbs_fe", lambda message: None)[0][0]
-    system = System([body])
-    system.floating = [0]
+    floating = FloatingBodies(np.array([0, body.n_dofs]), [body.space.h], [body.space.coordinates], policy)
+    floating.bodies = [0]
     h = body.space.h
     du = np.zeros(body.n_dofs)
     du[0::3] = 10.0 * FLOATING_STEP * h                      # a rigid x translation of 10 h
-    limited = system.limit_step(du)
+    limited = floating.limit(du)
     np.testing.assert_allclose(limited, 0.1 * du, rtol=1e-14)
-    assert system.damping == pytest.approx(10.0)
+    assert floating.damping == pytest.approx(10.0)
     small = 0.5 * FLOATING_STEP * h * np.ones(body.n_dofs)
-    assert system.limit_step(small) is small
-    assert system.damping == pytest.approx(10.0 * DAMPING_DECAY)
+    assert floating.limit(small) is small
+    assert floating.damping == pytest.approx(10.0 * DAMPING_DECAY)
     for _ in range(5):
-        system.limit_step(small)
-    assert system.damping == 1.0
-    system.damping, system._fading = 8.0, 0.5 * DAMPING_ABOVE
-    np.testing.assert_allclose(system.limit_step(du), 0.1 * du, rtol=1e-14)
-    assert system.damping == pytest.approx(8.0 * DAMPING_DECAY)
+        floating.limit(small)
+    assert floating.damping == 1.0
+    floating.damping, floating._fading = 8.0, 0.5 * DAMPING_ABOVE
+    np.testing.assert_allclose(floating.limit(du), 0.1 * du, rtol=1e-14)
+    assert floating.damping == pytest.approx(8.0 * DAMPING_DECAY)

@@ -14,7 +14,8 @@ from cgfem.fem.body import BodyModel
 from cgfem.fem.element import hexahedron
 from cgfem.fem.boundary import BoundaryPoints, WeakDirichlet, body_force_load
 from cgfem.geometry.specs import SphereSpec
-from cgfem.solve.static import System, solve_static
+from cgfem.solve.static import solve_static
+from cgfem.solve.system import System
 
 #: exponents (a, b, c) of x^a y^b z^c with a + b + c <= 3
 MONOMIALS = [m for m in itertools.product(range(4), repeat=3) if sum(m) <= 3]

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-import cgfem.solve.static as static
+import cgfem.solve.outer as outer
 
 #: errors below this fraction of the first are round-off of the converged state
 FLOOR = 1e-11
@@ -23,7 +23,7 @@ def record_errors(monkeypatch) -> list[dict]:
     whose next error is above ``FLOOR`` (see the module's docstring), and ``constant``: that
     iterate's ``e_k+1 / e_k^2``, the errors taken relative to the first."""
     solves: list[dict] = []
-    newton = static.newton
+    newton = outer.newton
 
     def wrapped(assemble, u0, solve, **kwargs):
         iterates: list[tuple[np.ndarray, float]] = []
@@ -60,5 +60,5 @@ def record_errors(monkeypatch) -> list[dict]:
         solves.append({"errors": errors, "residuals": list(result.residuals), "tail": tail,
                        "order": order, "constant": constant})
         return result
-    monkeypatch.setattr(static, "newton", wrapped)
+    monkeypatch.setattr(outer, "newton", wrapped)
     return solves

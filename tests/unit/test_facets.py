@@ -94,7 +94,7 @@ def polyhedron_volume(fb) -> tuple[float, float]:
     return by_surface, by_volume
 
 
-@pytest.mark.parametrize("degree", [4, 8, 11])
+@pytest.mark.parametrize("degree", [4, 8, 11, 12, 13])
 def test_triangle_rule_is_exact_to_its_degree(degree):
     bary, w = triangle_rule(degree)
     assert np.all(w > 0.0) and np.allclose(bary.sum(axis=1), 1.0, atol=1e-15)

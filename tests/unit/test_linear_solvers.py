@@ -9,9 +9,9 @@ import pytest
 import scipy.sparse as sp
 
 from tests.support import elasticity_fixture as fx
-from cgfem.solve import linear
-from cgfem.solve.linear import (BACKENDS, LinearSolverError, available_backends,
-                                choose_backend, factorize, rigid_body_modes)
+from cgfem.solve import backends, linear
+from cgfem.solve.backends import choose_backend, factorize
+from cgfem.solve.linear import BACKENDS, LinearSolverError, available_backends, rigid_body_modes
 
 AVAILABLE = available_backends()
 DIRECT = [b for b in ("superlu", "pardiso") if b in AVAILABLE]
@@ -196,19 +196,19 @@ def test_pyamg_gives_up_after_bounded_iterations(cube, monkeypatch) -> None:
 
 
 def test_choose_backend(monkeypatch) -> None:
-    big = linear.PARDISO_MAX_DOFS + 1
+    big = backends.PARDISO_MAX_DOFS + 1
     for name in BACKENDS:
         if name in AVAILABLE:
             assert choose_backend(10, True, name) == name
             assert choose_backend(10**7, False, name) == name
     monkeypatch.setattr(linear, "available_backends", lambda: BACKENDS)
     assert choose_backend(1000, True) == "pardiso"
-    assert choose_backend(linear.PARDISO_MAX_DOFS, True) == "pardiso"
+    assert choose_backend(backends.PARDISO_MAX_DOFS, True) == "pardiso"
     assert choose_backend(big, True) == "pyamg"
     assert choose_backend(big, False) == "pardiso"
     monkeypatch.setattr(linear, "available_backends", lambda: ("superlu", "pyamg"))
     assert choose_backend(1000, True) == "superlu"
-    assert choose_backend(linear.SUPERLU_MAX_DOFS + 1, True) == "pyamg"
+    assert choose_backend(backends.SUPERLU_MAX_DOFS + 1, True) == "pyamg"
     assert choose_backend(big, False) == "superlu"
     with pytest.raises(ValueError, match="'pardiso' is not available"):
         choose_backend(1000, True, "pardiso")
@@ -240,7 +240,7 @@ def test_saddle_point(backend: str, cube) -> None:
 def test_large_symmetric_saddle_point_is_refused(monkeypatch) -> None:
     """Above SADDLE_MAX_DOFS a symmetric saddle point is refused (the run fails with the
     reason) instead of a factorization that exhausts the memory."""
-    monkeypatch.setattr(linear, "SADDLE_MAX_DOFS", 10)
+    monkeypatch.setattr(backends, "SADDLE_MAX_DOFS", 10)
     A = sp.bmat([[sp.identity(20), sp.identity(20)], [sp.identity(20), None]], format="csr")
     with pytest.raises(LinearSolverError, match="saddle-point system of 40 unknowns"):
         factorize(A, symmetric=True, indefinite=True)

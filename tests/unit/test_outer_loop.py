@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cgfem.solve.newton import NewtonResult
-from cgfem.solve.static import Relaxation, newton_pass
+from cgfem.solve.outer import Relaxation, newton_pass
 
 
 @pytest.mark.parametrize("a", [0.6, -0.5, 0.2])
@@ -102,3 +102,26 @@ def test_full_newton_from_the_pass_start_when_it_fails_from_modified_newtons_poi
     np.testing.assert_array_equal(calls[1][0], modified.u)
     np.testing.assert_array_equal(calls[2][0], u0)
     assert history == [1e-3, 1e-12]
+
+
+def test_anderson_solves_an_affine_map_of_low_rank_exactly():
+    """Anderson mixing of depth m on G(x) = x0 + A (x - x0) with A of rank 2 (two coupled
+    error components, contractions 0.6 and -0.5): after the recovery of the third pass the
+    next iterate is the fixed point x0 to round-off, where plain substitution is still
+    0.6^3 off and Aitken's single factor cannot remove both components."""
+    from cgfem.solve.outer import Anderson
+    rng = np.random.default_rng(7)
+    shape = (5, 3, 3)
+    x0 = rng.standard_normal(shape)
+    V = np.linalg.qr(rng.standard_normal((x0.size, 2)))[0]
+    A = V @ np.diag([0.6, -0.5]) @ V.T
+
+    def G(x):
+        return x0 + (A @ (x - x0).ravel()).reshape(shape)
+    anderson = Anderson(depth=3)
+    x = x0 + (V @ np.array([1.0, 2.0])).reshape(shape)     # the error in A's range
+    for _ in range(3):
+        x = anderson.next([x], [G(x)])[0]
+    assert np.abs(x - x0).max() <= 1e-12
+    recovered = [x0]
+    assert Anderson().next([None], recovered) is recovered     # nothing frozen yet: the recovery

@@ -60,15 +60,15 @@ def test_reduced_solve_equals_direct(symmetric, preconditioner):
 def test_auto_reduces_saddle_points_above_the_direct_limit(monkeypatch, symmetric):
     """Above SADDLE_DIRECT_DOFS ``auto`` solves on the bodies' dofs, preconditioned by the
     backend the bodies' matrix alone would get, to the direct solution."""
-    from cgfem.solve import linear
+    from cgfem.solve import backends
     A, b, n_u, c = _system(symmetric)
-    monkeypatch.setattr(linear, "SADDLE_DIRECT_DOFS", 100)
-    solver = linear.factorize(A, symmetric=symmetric, indefinite=True, saddle=(n_u, [c]))
-    assert solver.backend == f"saddle-{linear.choose_backend(n_u, symmetric)}"
+    monkeypatch.setattr(backends, "SADDLE_DIRECT_DOFS", 100)
+    solver = backends.factorize(A, symmetric=symmetric, indefinite=True, saddle=(n_u, [c]))
+    assert solver.backend == f"saddle-{backends.choose_backend(n_u, symmetric)}"
     assert np.linalg.norm(A @ solver.solve(b) - b) <= 1e-8 * np.linalg.norm(b)
-    monkeypatch.setattr(linear, "SADDLE_DIRECT_DOFS", A.shape[0])
-    assert linear.factorize(A, symmetric=symmetric, indefinite=True, saddle=(n_u, [c])).backend == \
-        linear.choose_backend(A.shape[0], symmetric, indefinite=True)
+    monkeypatch.setattr(backends, "SADDLE_DIRECT_DOFS", A.shape[0])
+    assert backends.factorize(A, symmetric=symmetric, indefinite=True, saddle=(n_u, [c])).backend == \
+        backends.choose_backend(A.shape[0], symmetric, indefinite=True)
 
 
 def _fit_like_system(drop_rows: int = 4, seed: int = 1):

@@ -20,6 +20,58 @@ import scipy.sparse as sp
 from cgfem.contact.fitted import FitBlock, FittedSurface
 from cgfem.contact.pair import ContactPair, ContactPoints
 from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface
+from cgfem.solve.items import Couplings
+
+
+class PairItem:
+    """One contact pair as an item of the system (:mod:`cgfem.solve.items`): its residual
+    on the global unknowns ``slave`` and ``master`` (the kinematic vectors of its two sides:
+    bodies' dofs, or the ``Z`` of fitted patches) and its tangent couplings between them. Its
+    state (frozen ``p_N``, active set, pairing, held points) is the pair's own."""
+
+    def __init__(self, pair: ContactPair, slave: np.ndarray, master: np.ndarray):
+        self.pair, self.slave, self.master = pair, slave, master
+        self._glob = np.concatenate([slave, master])
+
+    def add(self, u: np.ndarray, t: float, r: np.ndarray, tangent: bool, update: bool = True
+            ) -> Couplings | None:
+        """Add the pair's residual (N) to ``r`` in place; its tangent couplings (N/m) if
+        ``tangent``. Only linearization points (``tangent`` and ``update``) move the recorded
+        pairing and active set: line-search trials must not count as active-set switches.
+        The load factor ``t`` does not enter (contact carries no load of its own)."""
+        r_s, r_m, trip = self.pair.assemble(u[self.slave], u[self.master], tangent, update and tangent)
+        r[self.slave] += r_s
+        r[self.master] += r_m
+        if not tangent:
+            return None
+        if trip is None:
+            return Couplings(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+        rr, cc, vv = trip
+        return Couplings(self._glob[rr], self._glob[cc], vv)
+
+
+class FitConstraintItem:
+    """The fit constraints of ``nurbs_fit`` (:meth:`ContactSet._constraints`, linear in the
+    unknowns: ``C u``) as an item of the system; stateless."""
+
+    def __init__(self, C: sp.coo_matrix):
+        self.C = C
+
+    def add(self, u: np.ndarray, t: float, r: np.ndarray, tangent: bool, update: bool = True
+            ) -> Couplings | None:
+        r += self.C @ u
+        return Couplings(self.C.row, self.C.col, self.C.data) if tangent else None
+
+
+def couplings_matrix(parts: list[Couplings], n: int) -> sp.coo_matrix:
+    """The (n, n) COO matrix of the entries of ``parts``, in their order (duplicates summed
+    when converted)."""
+    parts = [p for p in parts if p.values.size]
+    if not parts:
+        return sp.coo_matrix((n, n))
+    return sp.coo_matrix((np.concatenate([p.values for p in parts]),
+                          (np.concatenate([p.rows for p in parts]), np.concatenate([p.cols for p in parts]))),
+                         shape=(n, n))
 
 
 class ContactSet:
@@ -34,6 +86,7 @@ class ContactSet:
         self._index = [(self._kinematic_index(p.slave_surface, p.slave),
                         self._kinematic_index(p.surface, p.master)) for p in pairs]
         self._constraint: sp.coo_matrix | None = None
+        self._items: list | None = None
 
     def __bool__(self) -> bool:
         return bool(self.pairs)
@@ -106,37 +159,23 @@ class ContactSet:
         return [np.zeros(p.n_points, bool) if p.state.active is None else p.state.active.copy()
                 for p in self.pairs]
 
+    @property
+    def items(self) -> list:
+        """The set's items (:mod:`cgfem.solve.items`): one :class:`PairItem` per pair, then
+        the :class:`FitConstraintItem` of the fitted patches if there are any."""
+        if self._items is None:
+            self._items = [PairItem(p, *self._index[k]) for k, p in enumerate(self.pairs)]
+            if self.blocks:
+                self._items.append(FitConstraintItem(self._constraints()))
+        return self._items
+
     def add(self, u: np.ndarray, r: np.ndarray, tangent: bool, update: bool = True) -> sp.coo_matrix | None:
         """Add the contact residual (and the fit constraints' equations) to ``r`` (n,) in
         place; the tangent (COO on all n unknowns, :attr:`n_extra` included)."""
-        rows, cols, vals = [], [], []
-        for k, p in enumerate(self.pairs):
-            us, um = self._split(u, k)
-            # only linearization points (tangent evaluations) move the recorded pairing and
-            # active set: line-search trials must not count as active-set switches
-            r_s, r_m, trip = p.assemble(us, um, tangent, update and tangent)
-            gs, gm = self._index[k]
-            r[gs] += r_s
-            r[gm] += r_m
-            if trip is not None:
-                rr, cc, vv = trip
-                glob = np.concatenate([gs, gm])
-                rows.append(glob[rr])
-                cols.append(glob[cc])
-                vals.append(vv)
-        if self.blocks:
-            C = self._constraints()
-            r += C @ u
-            if tangent:
-                rows.append(C.row)
-                cols.append(C.col)
-                vals.append(C.data)
+        parts = [item.add(u, 0.0, r, tangent, update) for item in self.items]
         if not tangent:
             return None
-        n = r.size
-        if not rows:
-            return sp.coo_matrix((n, n))
-        return sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+        return couplings_matrix([p for p in parts if p is not None], r.size)
 
     def continuous(self, u: np.ndarray, r: np.ndarray) -> int:
         """Add to ``r`` (n,) in place the contact residual (and the fit constraints'

@@ -15,7 +15,7 @@ the constraint rows are of the size of the stiffness rows)::
 Eliminating ``mu`` and ``Z`` gives back the paper's ``f_int - f_ext + C^T f_c``. The tangent
 ``[[K, 0, -s G^T], [0, K_c, s M], [-s G, s M, 0]]`` is sparse (``G`` and ``M`` are banded
 and fixed) and, in small strain, symmetric indefinite: the linear backends take it as a
-saddle point (:func:`cgfem.solve.linear.choose_backend`, ``indefinite``).
+saddle point (:func:`cgfem.solve.backends.choose_backend`, ``indefinite``).
 
 :class:`FittedSurface` is the kinematic side: one body's fitted patches as a contact surface
 whose "nodes" are the free controls ``Z`` of its patches (its vector of unknowns is theirs,

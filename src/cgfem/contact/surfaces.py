@@ -39,7 +39,7 @@ from cgfem.contact._facet_kernels import triangle_hits
 from cgfem.contact.kinematics import MasterPoints, SlaveFrames
 from cgfem.embedding.partition import SurfaceQuadrature
 from cgfem.fem.element import HEX8, Hexahedron
-from cgfem.fem.space import LOCATE_TOL, Space, shape_functions
+from cgfem.fem.space import LOCATE_TOL, Space
 from cgfem.geometry.nurbs import NurbsSurface
 from cgfem.geometry.solid import Solid
 

@@ -101,12 +101,13 @@ def _null_space(phi, rows, n, tol):
             M[r, step], M[r, bc] = M[r, bc], M[r, step]
         perm[step], perm[bc] = perm[bc], perm[step]
         pivot = M[step, step]
-        for j in range(n):
+        # columns before ``step`` are unit vectors already: the pivot row is zero there
+        for j in range(step, n):
             M[step, j] /= pivot
         for r in range(d):
             f = M[r, step]
             if r != step and f != 0.0:
-                for j in range(n):
+                for j in range(step, n):
                     M[r, j] -= f * M[step, j]
         rank += 1
     V = np.zeros((n - rank, n))
@@ -419,21 +420,23 @@ def _column_rule(e_ijk, origin, h, shape, node_shape, element_ids, s_x, s_w, s_n
 
 @njit(cache=True, parallel=True)
 def column_rules(element_ids, elements_ijk, origin, h, shape, node_shape, s_x, s_w, s_n, s_off,
-                 t_key, t_x, t_w, t_n, l_start, l_off, l_coord, gx, gw, cone_tables, degree,
+                 t_key, t_x, t_w, t_n, l_start, l_off, l_coord, gx, gw, cone_tables, degree, rows,
                  out_x, out_w, out_count, out_status, out_full, out_moments):
     """Positive rules of at most ``M = (degree + 1)^3`` points, with the moments of the
     tensor Legendre polynomials of degree <= ``degree`` per variable, for every cut element
     (ids ``element_ids``, ascending, indices ``elements_ijk``; boundary points of row ``e``
     are ``s_off[e]:s_off[e + 1]``). ``gx, gw``: Gauss rule on [0, 1] of the columns and
     strips (exact for ``degree`` along them); ``cone_tables``: the radial and edge rules of
-    :func:`cgfem.embedding._cone_kernels.cone_rule`. Outputs: ``out_x`` (m, M, 3),
-    ``out_w`` (m, M), ``out_count`` (m,), ``out_status`` (m,) OK / CONES / NO_DIRECTION /
-    NOT_RECOMBINED, ``out_full`` (m,) the size of the exact column rule and ``out_moments``
-    (m, M) its local Legendre moments."""
-    m = elements_ijk.shape[0]
+    :func:`cgfem.embedding._cone_kernels.cone_rule`. Only the rows ``rows`` (r,) of
+    ``element_ids`` get rules (the others serve the stacks of :func:`_stack_rule`); row
+    ``q`` of the outputs is element ``rows[q]``: ``out_x`` (r, M, 3), ``out_w`` (r, M),
+    ``out_count`` (r,), ``out_status`` (r,) OK / CONES / NO_DIRECTION / NOT_RECOMBINED,
+    ``out_full`` (r,) the size of the exact column rule and ``out_moments`` (r, M) its
+    local Legendre moments."""
     half = 0.5 * h
     n_moments = (degree + 1) ** 3
-    for e in prange(m):
+    for q in prange(rows.shape[0]):
+        e = rows[q]
         ijk = elements_ijk[e].copy()
         x, w = _column_rule(ijk, origin, h, shape, node_shape, element_ids, s_x, s_w, s_n, s_off, e,
                             t_key, t_x, t_w, t_n, l_start, l_off, l_coord, gx, gw)
@@ -443,10 +446,10 @@ def column_rules(element_ids, elements_ijk, origin, h, shape, node_shape, s_x, s
                                     t_key, t_x, t_w, t_n, l_start, l_off, l_coord, cone_tables)
             kind = CONES
         n = w.shape[0]
-        out_full[e] = n
-        out_count[e] = 0
+        out_full[q] = n
+        out_count[q] = 0
         if n == 0:
-            out_status[e] = NO_DIRECTION
+            out_status[q] = NO_DIRECTION
             continue
         centre = np.empty(3)
         for d in range(3):
@@ -460,20 +463,20 @@ def column_rules(element_ids, elements_ijk, origin, h, shape, node_shape, s_x, s
             legendre_row(xi, degree, phi[i])
             wl[i] = w[i] / half**3
         full = moments(phi, wl)
-        out_moments[e, :] = full
+        out_moments[q, :] = full
         wl, ok = recombine_checked(phi, wl, full)
         if not ok:
-            out_status[e] = NOT_RECOMBINED
+            out_status[q] = NOT_RECOMBINED
             continue
         k = 0
         for i in range(n):
             if wl[i] > 0.0:
                 for d in range(3):
-                    out_x[e, k, d] = x[i, d]
-                out_w[e, k] = wl[i] * half**3
+                    out_x[q, k, d] = x[i, d]
+                out_w[q, k] = wl[i] * half**3
                 k += 1
-        out_count[e] = k
-        out_status[e] = kind
+        out_count[q] = k
+        out_status[q] = kind
 
 
 @njit(cache=True, parallel=True)

@@ -138,15 +138,27 @@ class ColumnRules:
 
 
 def column_rules(grid: CartesianGrid, elements: np.ndarray, surface: SurfaceQuadrature,
-                 trims: TrimQuadrature, lines: LineHits, degree: int = DEFAULT_DEGREE) -> ColumnRules:
+                 trims: TrimQuadrature, lines: LineHits, degree: int = DEFAULT_DEGREE,
+                 build: np.ndarray | None = None) -> ColumnRules:
     """Positive rules of the cut ``elements`` (ids) from the boundary rule of each, the
     trimming rules of the grid planes and the grid lines' material intervals (module doc),
     exact for polynomials of degree <= ``degree`` in each variable as far as the boundary
     rules are exact for their integrands (degree ``3 degree + 1`` on the surface: the
     column integral, of degree ``degree + 1`` along the height axis, times ``degree`` in
-    each of the other two)."""
+    each of the other two).
+
+    ``elements`` must hold every cut element: a column may run through the stack of cut
+    elements above or below its own (:func:`cgfem.embedding._column_kernels._stack_rule`).
+    ``build``: the ids, among ``elements``, whose rules are built (default all); the
+    result's ``elements`` are these."""
     n_mom = n_moments(degree)
     elements = np.asarray(elements, np.int64)
+    rows = np.arange(elements.size, dtype=np.int64)
+    if build is not None:
+        build = np.asarray(build, np.int64)
+        rows = np.searchsorted(elements, build).astype(np.int64)
+        if np.any(rows >= elements.size) or not np.array_equal(elements[rows], build):
+            raise ValueError("column_rules: every id of build must be one of elements")
     mine = np.flatnonzero(np.isin(surface.element, elements))
     order = mine[np.argsort(surface.element[mine], kind="stable")]
     s_el = surface.element[order]
@@ -156,7 +168,7 @@ def column_rules(grid: CartesianGrid, elements: np.ndarray, surface: SurfaceQuad
     t_order = np.argsort(t_key, kind="stable")
     start, l_off, l_coord = lines.packed()
     g, gw = np.polynomial.legendre.leggauss(n_gauss(degree))
-    m = elements.size
+    m = rows.size
     out_x = np.zeros((m, n_mom, 3))
     out_w = np.zeros((m, n_mom))
     out_count = np.zeros(m, np.int64)
@@ -172,8 +184,9 @@ def column_rules(grid: CartesianGrid, elements: np.ndarray, surface: SurfaceQuad
                         np.ascontiguousarray(trims.w[keep][t_order]),
                         np.ascontiguousarray(trims.normal[keep][t_order]),
                         start, l_off, l_coord, 0.5 * (g + 1.0), 0.5 * gw, _cones.cone_tables(degree),
-                        int(degree), out_x, out_w, out_count, out_status, out_full, out_moments)
-    rows = np.arange(n_mom)[None, :] < out_count[:, None]
-    volume = VolumeRule(out_x[rows], out_w[rows], np.repeat(elements, out_count))
-    return ColumnRules(elements, volume, out_status, out_full, out_moments, int(degree))
+                        int(degree), rows, out_x, out_w, out_count, out_status, out_full, out_moments)
+    built = elements[rows]
+    kept = np.arange(n_mom)[None, :] < out_count[:, None]
+    volume = VolumeRule(out_x[kept], out_w[kept], np.repeat(built, out_count))
+    return ColumnRules(built, volume, out_status, out_full, out_moments, int(degree))
 

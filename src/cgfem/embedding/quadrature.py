@@ -36,7 +36,8 @@ from cgfem.embedding.grid import CartesianGrid
 from cgfem.embedding.columns import DEFAULT_DEGREE, ColumnRules, LineHits, check_degree, column_rules, n_gauss
 from cgfem.embedding.lines import cast_lines, cast_z_lines
 from cgfem.embedding.moments import VolumeRule, fitted_volume_rule
-from cgfem.embedding.partition import DEFAULT_TOL, SurfaceQuadrature, partition_min_points, partition_surface
+from cgfem.embedding.partition import (DEFAULT_TOL, MAX_POINTS, SurfaceQuadrature, partition_min_points,
+                                      partition_surface)
 from cgfem.embedding.reduce import reduced_surface
 from cgfem.geometry.bvh import SurfaceIndex
 from cgfem.geometry.inside import points_inside
@@ -147,7 +148,8 @@ def _interior_rule(grid: CartesianGrid, elements: np.ndarray, degree: int = DEFA
 
 def embed(solid: Solid, grid: CartesianGrid, surface: str = "nurbs", tol: float = DEFAULT_TOL,
           points: int | None = None, index: SurfaceIndex | None = None,
-          definition: str | None = None, degree: int = DEFAULT_DEGREE) -> Embedding:
+          definition: str | None = None, degree: int = DEFAULT_DEGREE,
+          min_points: int | None = None) -> Embedding:
     """Classify the elements of ``grid`` and build the quadrature of ``solid`` for the
     boundary ``surface`` (``nurbs``: exact NURBS boundary; ``facets``: the marching-cubes
     polyhedron of :mod:`cgfem.embedding.facets`).
@@ -167,6 +169,10 @@ def embed(solid: Solid, grid: CartesianGrid, surface: str = "nurbs", tol: float 
         boundary rule integrate exactly: 2 (trilinear elements, the default) or 4
         (triquadratic); any integer in ``1..MAX_DEGREE`` is accepted. Cut elements get at
         most ``(degree + 1)^3`` points, inside elements ``(degree // 2 + 1)^3``.
+    min_points : fewest Gauss points per direction and interval of the NURBS partition,
+        by default :func:`cgfem.embedding.partition.partition_min_points` of ``degree``
+        (the most are ``max(MAX_POINTS, min_points + 2)``); with ``tol`` it sets how
+        exactly the boundary rule, hence the cut-cell rules, integrate their integrands
     """
     if surface not in SURFACE_DEFINITIONS:
         raise ValueError(f"unknown surface definition {surface!r} (known: {', '.join(SURFACE_DEFINITIONS)})")
@@ -193,7 +199,8 @@ def embed(solid: Solid, grid: CartesianGrid, surface: str = "nurbs", tol: float 
         return _assemble(grid, parts.status, rules, fitted, parts.surface, names,
                          parts.facet_surface(), definition, degree)
     z_lines = cast_z_lines(index, grid)
-    part = partition_surface(solid, grid, tol, min_points=partition_min_points(degree))
+    min_points = partition_min_points(degree) if min_points is None else int(min_points)
+    part = partition_surface(solid, grid, tol, min_points=min_points, max_points=max(MAX_POINTS, min_points + 2))
     status = np.zeros(grid.n_elements, np.int8)
     cut = np.unique(part.surface.element[part.surface.w > 0.0])
     status[cut] = CUT

@@ -19,7 +19,14 @@ Inexact Newton (``forcing``): an iterative linear solve need only reach the rela
 ``eta = forcing * tol * reference / |r|``: its error then adds at most ``forcing`` times the
 tolerance to the next residual, so the convergence test is met as with an exact solve, and
 the last iterations (and modified Newton's, far from ``|r| = reference``) stop the Krylov
-solver many digits early. ``solve`` is then called as ``solve(K, -r, eta)``.
+solver many digits early. ``solve`` is then called as ``solve(K, -r, eta)``. With
+``forcing_max`` the solve may also stop at ``min(forcing_max, |r| / reference)``, whichever is
+looser (the forcing ``eta_k ~ |r_k|`` of Dembo-Eisenstat-Steihaug, which keeps Newton's
+quadratic convergence): the first iterations, far from the solution, need few digits.
+
+``loose``: the solve may stop once ``|r| <= loose * |r(u0)|`` (an outer pass that is not the
+last needs no more: the frozen stress it is solved with changes next pass); the result's
+``tight`` says whether ``|r| <= tol * reference`` was reached as well.
 """
 
 from __future__ import annotations
@@ -50,37 +57,42 @@ class NewtonResult:
     residuals: list[float] = field(default_factory=list)
     reference: float = 0.0
     reason: str = ""
+    #: converged to ``tol * reference`` (not only to the ``loose`` bound)
+    tight: bool = False
 
 
 def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0: np.ndarray,
            solve: Callable[[object, np.ndarray], np.ndarray], *, tol: float, reference: float,
            max_iter: int, log: Callable[[int, float, str], None] | None = None,
            fixed_tangent: bool = False, limit: Callable[[np.ndarray], np.ndarray] | None = None,
-           forcing: float | None = None) -> NewtonResult:
+           forcing: float | None = None, forcing_max: float = 0.0, loose: float = 0.0) -> NewtonResult:
     """Solve ``r(u) = 0`` from ``u0`` until ``|r| <= tol * max(reference, |r(u0)|)``. With
     ``fixed_tangent`` no tangent is assembled (``solve`` gets None and must use a
     factorization it kept: modified Newton). ``limit(du)``: the Newton step shortened
     before the line search (a trust region on some unknowns), ``du`` itself if it is not.
     ``log(iteration, |r| / reference, note)``: ``note`` says how the step was shortened
     (line-search fraction, the limit's ratio of step norms), empty for a full step. ``forcing``:
-    inexact Newton (module docstring), None for exact solves."""
+    inexact Newton (module docstring), None for exact solves; ``forcing_max`` and ``loose``:
+    module docstring (0 turns them off)."""
     u = u0.copy()
     need = not fixed_tangent
     r, K = assemble(u, need)
     norm = float(np.linalg.norm(r))
     reference = max(reference, norm)
     result = NewtonResult(u, False, [norm], reference)
+    target = max(tol * reference, loose * norm)
     if log:
         log(0, norm / reference if reference > 0.0 else norm, "")
     if not np.isfinite(norm):
         result.reason = "nan"
         return result
     for it in range(1, max_iter + 1):
-        if norm <= tol * reference:
+        if norm <= target:
             result.converged, result.reason = True, "converged"
             break
         try:
-            du = solve(K, -r) if forcing is None else solve(K, -r, forcing_rtol(forcing, tol, reference, norm))
+            du = solve(K, -r) if forcing is None else \
+                solve(K, -r, forcing_rtol(forcing, tol, reference, norm, forcing_max))
         except RuntimeError as err:   # LinearSolverError: singular, no convergence, NaN
             result.reason = f"linear_solver: {err}"
             return result
@@ -118,11 +130,12 @@ def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0
         if log:
             log(it, norm / reference, _step_note(taken, shortened))
     else:
-        if norm <= tol * reference:
+        if norm <= target:
             result.converged, result.reason = True, "converged"
         else:
             result.reason = "max_iterations"
     result.u = u
+    result.tight = result.converged and norm <= tol * reference
     return result
 
 
@@ -137,10 +150,16 @@ def _step_note(step: float, shortened: float) -> str:
     return ", ".join(notes)
 
 
-def forcing_rtol(forcing: float, tol: float, reference: float, norm: float) -> float:
-    """The relative residual ``forcing * tol * reference / norm`` an inexact Newton step's
-    linear solve must reach at residual ``norm``, at most ``forcing``."""
-    return float(min(forcing, forcing * tol * reference / norm)) if norm > 0.0 else forcing
+def forcing_rtol(forcing: float, tol: float, reference: float, norm: float, forcing_max: float = 0.0) -> float:
+    """The relative residual an inexact Newton step's linear solve must reach at residual
+    ``norm``: ``forcing * tol * reference / norm`` (at most ``forcing``), or
+    ``min(forcing_max, norm / reference)`` if that is looser."""
+    if not norm > 0.0:
+        return forcing
+    eta = min(forcing, forcing * tol * reference / norm)
+    if forcing_max > 0.0 and reference > 0.0:
+        eta = max(eta, min(forcing_max, norm / reference))
+    return float(eta)
 
 
 def observed_order(residuals: list[float], floor: float = 1e-13) -> float:

@@ -39,7 +39,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from cgfem.solve.linear import LinearSolver, LinearSolverError, factorize
+from cgfem.solve.linear import LinearSolver, LinearSolverError, build
 
 #: entries of a row of ``C = M^-1 G`` below this fraction of its largest are left out of the
 #: preconditioner (chain3 at level 1: 1e-2 keeps 30 entries a row where ``G`` has 57, and
@@ -134,7 +134,7 @@ class ReducedSaddleSolver(LinearSolver):
         # what is factorized (or coarsened): the reduced matrix, n_u x n_u
         self.info.update(factorized_n=int(n_u), factorized_nnz=int(P.nnz))
         if preconditioner != "pyamg":
-            factor = factorize(P, backend=preconditioner, symmetric=symmetric)
+            factor = build(P, preconditioner, symmetric=symmetric)
             self.info["factor_nnz"] = int(factor.info.get("factor_nnz", 0))
             self._precondition = factor.solve_unchecked
             return

@@ -1,0 +1,120 @@
+"""Bodies held by contact alone: their detection, tangent shift and step limit.
+
+A body whose own conditions leave a rigid motion free (chain3's middle link in all six, the
+planar example's lower block in two) has a singular tangent until contact holds it, and
+along a frictionless spin always. :class:`FloatingBodies` finds such bodies from their first
+tangent, adds a fading diagonal shift to the matrix Newton solves (never to the residual, so
+the converged state is that of the unstabilized equations), limits Newton's step so that no
+node of such a body moves more than ``floating_step`` element sizes, and adapts the shift to
+how often steps had to be limited (Levenberg-Marquardt). Measurements and reasons:
+``docs/methods/contact.md``, "Bodies held by contact alone".
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from cgfem.solve.linear import rigid_body_modes
+from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
+
+
+def free_rigid_modes(coordinates: np.ndarray, K: sp.spmatrix, free_mode: float) -> int:
+    """How many rigid motions a body's own tangent ``K`` (3 n, 3 n; its conditions included,
+    no contact) leaves free: eigenvalues of ``P^T K P`` on the orthonormalized rigid modes
+    ``P`` (3 n, 6) of its nodes ``coordinates`` (n, 3) below ``free_mode`` times the mean
+    absolute diagonal of ``K``. A body without Dirichlet conditions has six; one held along x
+    and y on one face only may keep a translation and a rotation free."""
+    P, _ = np.linalg.qr(rigid_body_modes(coordinates))
+    S = P.T @ (K @ P)
+    scale = float(np.mean(np.abs(K.diagonal())))
+    return int(np.sum(np.linalg.eigvalsh(0.5 * (S + S.T)) < free_mode * scale))
+
+
+def shift_factor(norm: float, largest: float, floor: float = DEFAULT_POLICY.shift_floor) -> float:
+    """``norm / largest`` kept in ``[floor, 1]`` (1 if ``largest`` is not positive)."""
+    if not largest > 0.0:
+        return 1.0
+    return float(min(1.0, max(norm / largest, floor)))
+
+
+class FloatingBodies:
+    """The tangent shift and step limit of the bodies of a system held by contact alone.
+
+    ``offsets`` (n_bodies + 1,): body ``i`` owns unknowns ``offsets[i]:offsets[i+1]``;
+    ``h`` (n_bodies,): element sizes (m); ``coordinates``: per body its nodes (n_i, 3) (m).
+    Until :meth:`detect` has run, :attr:`bodies` is None.
+    """
+
+    def __init__(self, offsets: np.ndarray, h: list[float], coordinates: list[np.ndarray],
+                 policy: SolverPolicy = DEFAULT_POLICY):
+        self.offsets = np.asarray(offsets, np.int64)
+        self.h, self.coordinates, self.policy = list(h), coordinates, policy
+        #: indices of the floating bodies (None before :meth:`detect`)
+        self.bodies: list[int] | None = None
+        #: per body, the rigid motions its own conditions leave free
+        self.free_modes: dict[int, int] = {}
+        #: the shift's multiplier (:meth:`limit`), raised when a step had to be limited
+        self.damping = 1.0
+        #: per floating body, the norm of the force the shift put into the last Newton step (N)
+        self.stabilizing: dict[int, float] = {}
+        self._shift: sp.csr_matrix | None = None
+        self._scale = 0.0
+        self._fading = 1.0
+        self._largest: tuple[float, float] | None = None
+
+    def detect(self, tangents: list[sp.spmatrix]) -> list[int]:
+        """Find the floating bodies from each body's own first tangent (once)."""
+        if self.bodies is None:
+            self.free_modes = {i: free_rigid_modes(x, K, self.policy.free_mode)
+                               for i, (x, K) in enumerate(zip(self.coordinates, tangents))}
+            self.bodies = [i for i, n in self.free_modes.items() if n]
+        return self.bodies
+
+    def shifted(self, K: sp.csr_matrix, t: float, norm: float) -> sp.csr_matrix:
+        """``K`` plus the floating bodies' shift: ``floating_shift`` times the diagonal of the
+        first tangent, times ``damping`` and the fading factor ``norm`` over the largest
+        residual norm seen at load factor ``t`` (kept in ``[shift_floor, 1]``). ``K`` itself
+        when no body floats. The fading lets Newton converge fast on a soft rigid mode of
+        stiffness ``k``, corrected at the rate ``shift / (k + shift)`` per iteration."""
+        if not self.bodies:
+            return K
+        damping = self.damping      # a new increment's first tangent keeps the last damping
+        if self._largest is None or self._largest[0] != t:
+            self._largest = (t, norm)
+            self.damping = 1.0
+            self.stabilizing = {}
+        self._largest = (t, max(self._largest[1], norm))
+        self._fading = shift_factor(norm, self._largest[1], self.policy.shift_floor)
+        self._scale = damping * self._fading
+        if self._shift is None:
+            d = np.zeros(K.shape[0])
+            diag = K.diagonal()
+            for i in self.bodies:
+                a, b = self.offsets[i], self.offsets[i + 1]
+                d[a:b] = self.policy.floating_shift * diag[a:b]
+            self._shift = sp.diags(d, format="csr")
+        return K + self._scale * self._shift
+
+    def limit(self, du: np.ndarray) -> np.ndarray:
+        """The Newton step ``du`` scaled down (all of it: the bodies' equations are coupled)
+        so that no node of a floating body moves by more than ``floating_step`` of its
+        element size; ``du`` itself if none does. A step shortened to a fraction ``f`` while
+        the residual is above ``damping_above`` of the increment's largest multiplies the
+        shift of the next tangents by ``1 / f``; any other step by ``damping_decay``, within
+        ``[1, damping_max]``. Records :attr:`stabilizing`."""
+        p = self.policy
+        factor = 1.0
+        shift = None if not self.bodies or self._shift is None else self._shift.diagonal()
+        for i in self.bodies or ():
+            a, b = self.offsets[i], self.offsets[i + 1]
+            if shift is not None:
+                self.stabilizing[i] = float(np.linalg.norm(self._scale * shift[a:b] * du[a:b]))
+            move = float(np.abs(du[a:b]).max(initial=0.0))
+            allowed = p.floating_step * self.h[i]
+            if move > allowed:
+                factor = min(factor, allowed / move)
+        raise_ = factor < 1.0 and self._fading >= p.damping_above
+        self.damping = float(np.clip(self.damping / factor if raise_ else self.damping * p.damping_decay,
+                                     1.0, p.damping_max))
+        return du if factor == 1.0 else factor * du

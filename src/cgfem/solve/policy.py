@@ -1,0 +1,110 @@
+"""The static solver's tuning constants in one place.
+
+:class:`SolverPolicy` holds every constant the nonlinear solver and its collaborators use
+that a case file does not set (those are :class:`~cgfem.case.model.SolverOptions`). The
+defaults are the measured values; why each has its value is in ``docs/methods/elasticity.md``
+("The outer loop", "Newton", "Linear solvers") and ``docs/methods/contact.md`` ("Contact
+onset", "Bodies held by contact alone"). The system carries its policy
+(:class:`~cgfem.solve.system.System`, ``run_case(..., policy=...)``): tests and benchmarks build
+one with other values (``dataclasses.replace(DEFAULT_POLICY, onset_penetration=math.inf)``)
+instead of patching module globals.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+
+@dataclass(frozen=True)
+class SolverPolicy:
+    """Tuning of the static solver (every value dimensionless unless stated).
+
+    Newton and the outer loop
+    -------------------------
+    modified_newton_iterations : iterations allowed to modified Newton (the last
+        factorization kept) in outer passes after the first, on the direct path only (a Krylov
+        solve with an old matrix costs as much as with a new one); 0: full Newton always.
+    forcing : inexact Newton's forcing factor ``f``: an iterative linear solve stops at the
+        relative residual ``f * newton_tol * reference / |r|`` (at most ``f``).
+    forcing_max : on the Krylov path inexact Newton may also stop a linear solve at
+        ``min(forcing_max, |r| / reference)`` where that is looser (0: off).
+    pass_tolerance : an outer pass that is not the last (the recovered stress still changing by
+        more than ``100 outer_tol``) stops Newton at ``pass_tolerance`` times its first residual,
+        or at ``newton_tol`` if that is reached first (0: every pass to ``newton_tol``).
+    predictor : the start of a load increment: ``"none"`` (the last converged state) or
+        ``"secant"`` (extrapolated linearly in the load factor from the last two).
+    acceleration : the outer loop's fixed-point acceleration of the frozen recovered stress
+        (and ``p_N`` with it): ``"aitken"`` (Irons-Tuck dynamic relaxation), ``"anderson"``
+        (Anderson mixing of depth :attr:`anderson_depth`) or ``"none"`` (plain substitution).
+    anderson_depth : earlier passes Anderson mixing combines.
+
+    Bodies held by contact alone (:class:`~cgfem.solve.floating.FloatingBodies`)
+    ---------------------------------------------------------------------------
+    free_mode : a rigid motion whose stiffness ``v^T K v`` is below this fraction of the mean
+        diagonal of the body's own tangent is free.
+    floating_shift : diagonal shift of a floating body's tangent, as a fraction of its first
+        tangent's diagonal (tangent only, never the residual).
+    shift_floor : the shift fades with ``|r| / max |r|`` of the increment down to this fraction.
+    floating_step : largest nodal move of a floating body in one Newton step, in its element
+        sizes ``h``.
+    damping_decay, damping_above, damping_max : the Levenberg-Marquardt damping of the shift: a
+        step limited to a fraction ``f`` at ``|r|`` above ``damping_above`` of the increment's
+        largest multiplies the shift of the next tangents by ``1 / f``; any other step by
+        ``damping_decay``; kept in ``[1, damping_max]`` (``damping_max = 1`` turns it off).
+
+    Contact onset (:class:`~cgfem.solve.onset.OnsetLimit`)
+    -------------------------------------------------------
+    onset_penetration : deepest new penetration of a slave point, in its element sizes, the
+        first Newton step of a solve may cause; ``inf`` turns the limit off.
+
+    Linear solves (:class:`~cgfem.solve.solves.LinearSolves`)
+    ----------------------------------------------------------
+    krylov_min_dofs : ``linear: auto`` solves a system of at least this many unknowns that is
+        not a saddle point by the preconditioned Krylov path, smaller ones by the direct path
+        (:mod:`cgfem.solve.backends`).
+    krylov_refresh : a Krylov solve that needs more than this many iterations with a kept
+        preconditioner is repeated with a preconditioner of the current matrix.
+    krylov_max_iterations : iterations after which a Krylov solve with a fresh
+        preconditioner is stalled: the system is then factorized directly (logged).
+    krylov_rtol : the tightest relative residual a Krylov solve is asked for (inexact Newton
+        asks for looser ones).
+    """
+
+    modified_newton_iterations: int = 6
+    forcing: float = 0.1
+    forcing_max: float = 1e-3
+    pass_tolerance: float = 0.0
+    predictor: str = "none"
+    acceleration: str = "aitken"
+    anderson_depth: int = 3
+    free_mode: float = 1e-10
+    floating_shift: float = 1e-8
+    shift_floor: float = 1e-4
+    floating_step: float = 1.0
+    damping_decay: float = 0.25
+    damping_above: float = 1e-2
+    damping_max: float = 1e6
+    onset_penetration: float = 0.1
+    krylov_min_dofs: int = 100_000
+    krylov_refresh: int = 40
+    krylov_max_iterations: int = 400
+    krylov_rtol: float = 1e-10
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name in CHOICES:
+                if value not in CHOICES[f.name]:
+                    raise ValueError(f"{f.name} must be one of {', '.join(CHOICES[f.name])}, got {value!r}")
+            elif isinstance(value, bool) or not isinstance(value, (int, float)) or math.isnan(value) \
+                    or value < 0:
+                raise ValueError(f"{f.name} must be a number >= 0, got {value!r}")
+        if self.damping_max < 1.0:
+            raise ValueError(f"damping_max must be >= 1, got {self.damping_max!r}")
+
+
+#: the values of the policy's named choices
+CHOICES = {"acceleration": ("aitken", "anderson", "none"), "predictor": ("none", "secant")}
+
+DEFAULT_POLICY = SolverPolicy()

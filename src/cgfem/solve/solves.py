@@ -1,0 +1,153 @@
+"""Newton's linear solves: the path a system's matrices take, and what is kept between them.
+
+:class:`LinearSolves` is what Newton calls as ``solve(K, b, rtol)``. Two paths:
+
+- **direct**: the backend :mod:`cgfem.solve.backends` chooses (pardiso, superlu, pyamg for
+  large symmetric systems without contact, the reduced saddle solver of ``nurbs_fit``), set up
+  once per matrix and kept while Newton passes the same matrix object (or, in modified
+  Newton, while ``frozen``);
+- **krylov** (``linear: auto`` on a system of at least ``policy.krylov_min_dofs`` unknowns
+  that is not a saddle point): CG or GMRES preconditioned by smoothed-aggregation AMG with the
+  rigid-body modes (:mod:`cgfem.solve.krylov`). The preconditioner is kept across Newton
+  iterations, outer passes and load steps while a solve with it needs at most
+  ``policy.krylov_refresh`` iterations; past that the solve is repeated with a preconditioner
+  of the current matrix, and a solve that stalls even then (``policy.krylov_max_iterations``)
+  falls back to a factorization of that matrix. The tolerance is inexact Newton's
+  (:func:`cgfem.solve.newton.forcing_rtol`), never tighter than ``policy.krylov_rtol``.
+
+Every choice is logged: the path and backend once, and per Krylov solve its iterations and
+whether the preconditioner was kept, refreshed, or the solve fell back.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+import numpy as np
+import scipy.sparse as sp
+
+from cgfem.solve.backends import choose_backend, factorize
+from cgfem.solve.krylov import AMGPreconditioner, krylov_solve
+from cgfem.solve import linear
+from cgfem.solve.linear import LinearSolverError
+from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
+
+DIRECT, KRYLOV = "direct", "krylov"
+
+
+class LinearSolves:
+    """Linear solves of one system's Newton matrices (n, n).
+
+    ``backend``: the case's ``solver.linear`` (``auto`` or a backend name); ``near_null``
+    (n, k): the rigid-body modes of every body (AMG); ``symmetric``, ``indefinite`` (a saddle
+    point), ``saddle``: the system's structure (:class:`~cgfem.solve.system.System`).
+    Failures raise :class:`~cgfem.solve.linear.LinearSolverError`, which Newton reports."""
+
+    def __init__(self, backend: str, near_null: np.ndarray, symmetric: bool = True, indefinite: bool = False,
+                 saddle: tuple | None = None, policy: SolverPolicy = DEFAULT_POLICY,
+                 log: Callable[[str], None] | None = None):
+        self.backend, self.near_null, self.symmetric = backend, near_null, symmetric
+        self.indefinite, self.saddle, self.policy = indefinite, saddle, policy
+        self.log = log or (lambda message: None)
+        self._key, self._factor = None, None
+        #: modified Newton: the last setup serves for a new matrix (or for None)
+        self.frozen = False
+        #: the Krylov path's kept preconditioner, and whether it was built on the current matrix
+        self._amg: AMGPreconditioner | None = None
+        self._fresh = False
+        self._logged = False
+        self._n = None
+        #: per solve: (path, iterations, what happened) for the benchmarks and the tests
+        self.history: list[tuple[str, int, str]] = []
+
+    @classmethod
+    def of(cls, system, backend: str, log: Callable[[str], None] | None = None) -> "LinearSolves":
+        """The solves of ``system``'s matrices with the case's ``backend``; ``ValueError`` if
+        that backend cannot solve them."""
+        choose_backend(system.n_dofs, system.symmetric, backend, system.indefinite)
+        solves = cls(backend, system.near_null(), system.symmetric, system.indefinite, system.saddle(),
+                     system.policy, log)
+        solves._n = system.n_dofs
+        return solves
+
+    @property
+    def factorizes(self) -> bool:
+        """Whether the matrices are factorized (the direct path), so that modified Newton's
+        solves with a kept factorization are cheap; on the Krylov path a solve with the last
+        matrix costs as much as one with a new matrix, and full Newton converges faster."""
+        return self._n is None or self.path(self._n) == DIRECT
+
+    def path(self, n: int) -> str:
+        """:data:`KRYLOV` for ``auto`` on a system of at least ``policy.krylov_min_dofs``
+        unknowns that is not a saddle point, else :data:`DIRECT`."""
+        if self.backend == "auto" and not self.indefinite and n >= self.policy.krylov_min_dofs:
+            return KRYLOV
+        return DIRECT
+
+    def __call__(self, K: sp.csr_matrix | None, b: np.ndarray, rtol: float | None = None) -> np.ndarray:
+        """The solution of ``K x = b``; ``rtol``: the relative residual an iterative solve may
+        stop at (inexact Newton). ``K`` None (modified Newton): the last matrix."""
+        n = self._n = b.shape[0]
+        if self.path(n) == KRYLOV:
+            return self._krylov(K, b, rtol)
+        if self._key is not K and not (self.frozen and self._factor is not None):
+            self._factor = factorize(K, backend=self.backend, symmetric=self.symmetric,
+                                     near_null=self.near_null, indefinite=self.indefinite, saddle=self.saddle)
+            self._key = K
+            if not self._logged:
+                self._logged = True
+                self.log(f"linear: direct, {self._factor.backend}, {n} unknowns")
+        x = self._factor.solve(b, rtol)
+        self.history.append((DIRECT, int(self._factor.info["iterations"][-1]), self._factor.backend))
+        return x
+
+    def _krylov(self, K: sp.csr_matrix | None, b: np.ndarray, rtol: float | None) -> np.ndarray:
+        """The Krylov path (module docstring)."""
+        p = self.policy
+        if K is None or (self.frozen and self._key is not None):
+            K = self._key
+        if K is not self._key:
+            self._key, self._factor, self._fresh = K, None, False
+        if self._factor is not None:        # this matrix was factorized after a stall
+            self.history.append((DIRECT, 0, "fallback kept"))
+            return self._factor.solve(b)
+        target = max(p.krylov_rtol, rtol if rtol is not None else 0.0)
+        kind = "cg" if self.symmetric else "gmres"
+        tic = time.perf_counter()
+        note = "kept"
+        total, res, ok = 0, float("nan"), False
+        try:
+            if self._amg is None:
+                self._refresh(K)
+                note = "new"
+            x, its, res, ok = krylov_solve(K, b, self._amg, target,
+                                           p.krylov_max_iterations if self._fresh else p.krylov_refresh,
+                                           self.symmetric)
+            total = its
+            if not ok and not self._fresh:
+                self._refresh(K)
+                note = f"refreshed after {its}"
+                x, its, res, ok = krylov_solve(K, b, self._amg, target, p.krylov_max_iterations, self.symmetric,
+                                               x0=x)
+                total += its
+        except LinearSolverError as err:      # a breakdown (an indefinite matrix for CG), NaN
+            self._amg, ok = None, False
+            note = str(err)
+        if ok:
+            self.history.append((KRYLOV, total, note))
+            self.log(f"linear: {kind} {total} iterations to {res:.1e} (target {target:.1e}; preconditioner "
+                     f"{note}; {time.perf_counter() - tic:.2f} s)")
+            return x
+        direct = "pardiso" if "pardiso" in linear.available_backends() else "superlu"
+        self._factor = factorize(K, backend=direct, symmetric=self.symmetric)
+        self.history.append((DIRECT, total, "fallback"))
+        self.log(f"linear: {kind} stalled at {res:.1e} after {total} iterations (target {target:.1e}; {note}); "
+                 f"fell back to {self._factor.backend} for this matrix")
+        return self._factor.solve(b)
+
+    def _refresh(self, K: sp.csr_matrix) -> None:
+        """A preconditioner of ``K``, kept for the matrices that follow."""
+        self._amg = None                    # free the old hierarchy first
+        self._amg = AMGPreconditioner(K, self.near_null, self.symmetric)
+        self._fresh = True

@@ -1,0 +1,160 @@
+"""A case's bodies and contact pairs as one system of equations, summed over its items.
+
+The unknowns are the bodies' dofs stacked in order (body ``i`` owns ``offsets[i]:offsets[i+1]``)
+followed by the unknowns the contact set owns (``contact.n_extra``: the fitted surfaces and
+their constraint multipliers of ``nurbs_fit``, :mod:`cgfem.contact.fitted`). The residual and
+the tangent are sums over items (:mod:`cgfem.solve.items`): every body, every contact pair,
+the fit constraints. Two collaborators act on what Newton solves: the floating bodies'
+tangent shift and step limit (:class:`~cgfem.solve.floating.FloatingBodies`) and the
+contact-onset limit (:class:`~cgfem.solve.onset.OnsetLimit`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from cgfem.contact.assembly import ContactSet
+from cgfem.solve.floating import FloatingBodies
+from cgfem.solve.items import Block, BodyItem
+from cgfem.solve.linear import rigid_body_modes
+from cgfem.solve.onset import OnsetLimit
+from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
+from cgfem.solve.saddle import FitConstraint
+
+
+class System:
+    """The items of a case on one vector of unknowns (module docstring).
+
+    ``bodies``: the body models (:class:`~cgfem.fem.body.BodyModel`); ``pairs``: contact
+    pairs (:class:`~cgfem.contact.pair.ContactPair`) between them, by their index in
+    ``bodies``; ``policy``: the solver's tuning (:class:`~cgfem.solve.policy.SolverPolicy`)."""
+
+    def __init__(self, bodies: list, pairs: list | None = None, policy: SolverPolicy = DEFAULT_POLICY):
+        self.bodies = bodies
+        self.policy = policy
+        sizes = [b.n_dofs for b in bodies]
+        self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        self.body_items = [BodyItem(b, a) for b, a in zip(bodies, self.offsets[:-1])]
+        self.contact = ContactSet(list(pairs or []), self.offsets)
+        #: the bodies held by contact alone, their tangent shift and step limit
+        self.floating = FloatingBodies(self.offsets, [b.space.h for b in bodies],
+                                       [b.space.coordinates for b in bodies], policy)
+        if not self.contact:
+            self.floating.bodies = []
+        #: the contact-onset limit of a solve's first Newton step
+        self.onset = OnsetLimit(self.contact, lambda: bool(self.floating.bodies), policy)
+        self._K: sp.csr_matrix | None = None
+
+    @property
+    def items(self) -> list:
+        """Every item, in the order their residuals are summed: bodies, then contact."""
+        return self.body_items + (self.contact.items if self.contact else [])
+
+    @property
+    def linear(self) -> bool:
+        """Small strain without contact: one tangent serves every iteration."""
+        return not any(b.finite for b in self.bodies) and not self.contact
+
+    @property
+    def symmetric(self) -> bool:
+        """Hyperelastic bulk, penalties and the frozen recovered stress give a symmetric
+        tangent; contact in finite strain does not (the current-area weight)."""
+        return self.contact.symmetric
+
+    @property
+    def indefinite(self) -> bool:
+        """A saddle-point tangent (the fit constraints of ``nurbs_fit``)."""
+        return self.contact.n_extra > 0
+
+    @property
+    def n_dofs(self) -> int:
+        """All unknowns: the bodies' dofs and the contact set's own."""
+        return int(self.offsets[-1]) + self.contact.n_extra
+
+    def split(self, u: np.ndarray) -> list[np.ndarray]:
+        """The bodies' displacements (views of ``u``)."""
+        return [item.dofs(u) for item in self.body_items]
+
+    def freeze(self, frozen_stress: list[np.ndarray | None]) -> None:
+        """Hold every body's recovered stress at ``frozen_stress`` (one (n_nodes, 3, 3) array
+        (Pa) or None per body) in the residuals and tangents that follow."""
+        for item, s in zip(self.body_items, frozen_stress):
+            item.frozen = s
+
+    def assemble(self, u: np.ndarray, t: float, tangent: bool) -> tuple[np.ndarray, sp.csr_matrix | None]:
+        """The residual (n_dofs,) (N) at ``u`` and load factor ``t``, the sum of every item's,
+        and if asked the tangent (CSR, N/m): the bodies' blocks on the diagonal, the contact
+        couplings off it, plus the floating bodies' shift (tangent only)."""
+        reuse = self.linear and self._K is not None
+        r = np.zeros(self.n_dofs)
+        parts = [item.add(u, t, r, tangent and not reuse) for item in self.body_items]
+        couplings = self.contact.add(u, r, tangent) if self.contact else None
+        if not tangent:
+            return r, None
+        if reuse:
+            return r, self._K
+        K = self._stack([p for p in parts if isinstance(p, Block)])
+        if self.linear:
+            self._K = K
+        if couplings is not None:
+            self.floating.detect([p.K for p in parts])
+            K = K + couplings.tocsr()
+            K = self.floating.shifted(K, t, float(np.linalg.norm(r)))
+        return r, K
+
+    def _stack(self, blocks: list[Block]) -> sp.csr_matrix:
+        """The bodies' blocks on the diagonal, a zero block on the contact set's unknowns."""
+        extra = self.contact.n_extra
+        return sp.block_diag([b.K for b in blocks] + ([sp.csr_matrix((extra, extra))] if extra else []),
+                             format="csr")
+
+    def continuous_residual(self, u: np.ndarray, t: float) -> tuple[np.ndarray, int]:
+        """The residual at ``u`` with every master hit on the continuous surface, in the
+        element or triangle holding it (:meth:`~cgfem.contact.assembly.ContactSet.continuous`),
+        and how many active hits lie on a kept piece's extension instead."""
+        r = np.zeros(self.n_dofs)
+        for item in self.body_items:
+            item.add(u, t, r, False)
+        return r, self.contact.continuous(u, r)
+
+    def limit(self, start: np.ndarray, du: np.ndarray, first: bool) -> np.ndarray:
+        """Newton's step ``du`` from ``start`` after the floating bodies' step limit and, on a
+        solve's ``first`` step, the contact-onset limit."""
+        du = self.floating.limit(du)
+        return self.onset.limit(start, du) if first else du
+
+    def recover(self, u: np.ndarray) -> list[np.ndarray]:
+        """Every body's nodal recovered stress (n_nodes, 3, 3) (Pa) at ``u``."""
+        return [item.recover(u) for item in self.body_items]
+
+    def load_norm(self, t: float) -> float:
+        """``|t f_ext|`` of every body's dead loads (N)."""
+        return float(t * np.sqrt(sum(np.dot(b.load, b.load) for b in self.bodies)))
+
+    def force_scale(self, u: np.ndarray) -> float:
+        """Norm of the bulk internal force at ``u`` (N): the size of the forces in play,
+        against which Newton's residual is measured (it does not shrink with the increment)."""
+        total = 0.0
+        for item in self.body_items:
+            f = item.internal_force(u)
+            total += float(np.dot(f, f))
+        return float(np.sqrt(total))
+
+    def saddle(self) -> tuple[int, list[FitConstraint]] | None:
+        """nurbs_fit's saddle point for the linear solver (:mod:`cgfem.solve.saddle`): the
+        bodies' dof count and one block per fitted patch; None without fitted patches."""
+        blocks = self.contact.blocks
+        if not blocks:
+            return None
+        return int(self.offsets[-1]), [
+            FitConstraint(b.z, b.mu, self.offsets[b.body] + np.arange(self.bodies[b.body].n_dofs), b.fit.M, b.fit.G,
+                          b.fit.factor.solve, b.scale) for b in blocks]
+
+    def near_null(self) -> np.ndarray:
+        """Rigid-body modes of every body, block by block (n_dofs, 6 n_bodies); zero on the
+        contact set's own unknowns."""
+        blocks = [rigid_body_modes(b.space.coordinates) for b in self.bodies]
+        modes = sp.block_diag(blocks).toarray()
+        return np.vstack([modes, np.zeros((self.contact.n_extra, modes.shape[1]))])
+

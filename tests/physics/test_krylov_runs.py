@@ -1,0 +1,97 @@
+"""Whole contact problems on the Krylov path of ``linear: auto`` (AMG-preconditioned GMRES,
+:mod:`cgfem.solve.solves`) against the direct path: chain2_steel's first load step at level 1
+in finite strain (non-symmetric, every contact point of the onset), chain3 at level 0 (its
+middle link held by contact alone), and a run whose every Krylov solve is made to stall,
+which falls back to factorizations and still converges to the same state."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from cgfem.case import parse_case, parse_yaml
+from cgfem.run import run_case
+from cgfem.solve.policy import SolverPolicy
+from tests.support.paths import CASES
+
+#: every test here solves a whole problem
+pytestmark = pytest.mark.slow
+
+KRYLOV = replace(SolverPolicy(), krylov_min_dofs=0)
+
+
+def first_step(name: str, fraction: float = 1.0):
+    """The case ``name`` in one load step reaching ``fraction`` of its displacements'
+    first step."""
+    path = CASES / f"{name}.yaml"
+    data = parse_yaml(path.read_text())
+    for condition in data["boundary"]:
+        if condition.get("type") == "displacement":
+            condition["components"] = {k: v * fraction / data["steps"] if isinstance(v, float) else v
+                                       for k, v in condition["components"].items()}
+    data["steps"] = 1
+    return parse_case(data, path.parent)
+
+
+def solve(case, level: int, surface: str, folder, policy: SolverPolicy) -> tuple[dict, list[str]]:
+    lines: list[str] = []
+    status = run_case(case, level, surface, folder, lines.append, policy)
+    assert status.status == "converged", status.message
+    return json.loads((folder / "summary.json").read_text()), lines
+
+
+def reactions(summary: dict) -> np.ndarray:
+    step = summary["steps"][-1]
+    return np.concatenate([np.ravel(v) for _, v in sorted(step["reactions"].items())]
+                          + [np.ravel(step["contact"]["force"])])
+
+
+def newton_iterations(summary: dict) -> int:
+    return sum(len(p) - 1 for step in summary["steps"] for p in step["pass_residuals"])
+
+
+def test_krylov_path_solves_the_steel_chain_to_the_direct_solution(tmp_path):
+    """chain2_steel's first step at level 1 (finite strain: GMRES; the onset of contact): the
+    Krylov path reaches the direct path's reactions and contact force to 1e-8 and the same
+    active set, with about as many Newton iterations (full Newton in every pass instead of
+    modified Newton after the first), and logs every solve with its iterations."""
+    case = first_step("chain2_steel")
+    direct, _ = solve(case, 1, "nurbs_fe", tmp_path / "direct", SolverPolicy())
+    krylov, lines = solve(case, 1, "nurbs_fe", tmp_path / "krylov", KRYLOV)
+    a, b = reactions(direct), reactions(krylov)
+    assert np.abs(a - b).max() <= 1e-8 * np.abs(a).max()
+    assert direct["steps"][-1]["contact"]["active_points"] == krylov["steps"][-1]["contact"]["active_points"] > 10
+    assert newton_iterations(krylov) <= newton_iterations(direct) + 4
+    solves = [line for line in lines if line.startswith("linear: gmres")]
+    assert len(solves) == newton_iterations(krylov)
+    assert sum("preconditioner kept" in line for line in solves) > len(solves) // 2
+
+
+def test_krylov_path_holds_a_body_held_by_contact_alone(tmp_path):
+    """chain3 at level 0 (small strain: CG): the middle link is held by contact alone (six
+    free rigid motions, the tangent shift); the Krylov path converges to the direct path's
+    reactions (1e-8) without falling back."""
+    case = first_step("chain3")
+    direct, _ = solve(case, 0, "nurbs_fe", tmp_path / "direct", SolverPolicy())
+    krylov, lines = solve(case, 0, "nurbs_fe", tmp_path / "krylov", KRYLOV)
+    assert krylov["steps"][-1]["contact"]["floating"]["link_c"]["free_modes"] == 6
+    a, b = reactions(direct), reactions(krylov)
+    assert np.abs(a - b).max() <= 1e-8 * np.abs(a).max()
+    # small strain: a symmetric tangent, CG; no solve stalls
+    assert any(line.startswith("linear: cg") for line in lines)
+    assert not any("stalled" in line for line in lines)
+
+
+def test_a_stalled_krylov_solve_falls_back_and_the_run_converges(tmp_path):
+    """With two Krylov iterations allowed no solve reaches its tolerance: every one falls
+    back to a factorization (logged), and the run converges to the direct path's state."""
+    case = first_step("chain2_steel", 0.5)
+    stall = replace(KRYLOV, krylov_max_iterations=2, krylov_refresh=2)
+    direct, _ = solve(case, 0, "nurbs_fe", tmp_path / "direct", SolverPolicy())
+    fallen, lines = solve(case, 0, "nurbs_fe", tmp_path / "stalled", stall)
+    assert sum("stalled" in line and "fell back" in line for line in lines) >= newton_iterations(fallen) // 2
+    a, b = reactions(direct), reactions(fallen)
+    assert np.abs(a - b).max() <= 1e-8 * np.abs(a).max()

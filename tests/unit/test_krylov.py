@@ -1,0 +1,149 @@
+"""The Krylov path of Newton's linear solves on a two-body contact-like system: a clamped
+cube and a cube held by contact alone (penalty springs between facing nodes, stiffness of
+order kappa E / h, the floating body's small tangent shift), symmetric and non-symmetric."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from tests.support import elasticity_fixture as fx
+from cgfem.solve.krylov import AMGPreconditioner, krylov_solve
+from cgfem.solve.linear import rigid_body_modes
+from cgfem.solve.policy import SolverPolicy
+from cgfem.solve.solves import DIRECT, KRYLOV, LinearSolves
+
+N = 6
+
+
+def two_bodies(symmetric: bool = True, coupling: float = 1.0, seed: int = 0):
+    """(K, b, near_null): cube A (N^3 elements, E = 1, h = 1) clamped by a penalty on z = 0,
+    cube B above it with no condition, the top nodes of A tied to the facing bottom nodes of
+    B by springs of stiffness ``coupling`` times A's largest diagonal (the contact block), B's
+    diagonal shifted by 1e-8 of itself (the floating body's shift). ``symmetric=False`` adds
+    a non-symmetric coupling of 10 % (finite strain's current-area weight). Load: B's top
+    pulled sideways and down."""
+    rng = np.random.default_rng(seed)
+    K1 = fx.stiffness(N, N, N)
+    x = fx.grid_coords(N, N, N)
+    n1 = K1.shape[0]
+    bottom = np.flatnonzero(np.repeat(x[:, 2] == 0.0, 3))
+    KA = K1 + sp.csr_matrix((np.full(bottom.size, 1e3 * K1.diagonal().max()), (bottom, bottom)), shape=K1.shape)
+    KB = K1 + sp.diags(1e-8 * K1.diagonal())
+    top_a = np.flatnonzero(x[:, 2] == N)
+    bottom_b = np.flatnonzero(x[:, 2] == 0.0)
+    k = coupling * K1.diagonal().max()
+    rows, cols, vals = [], [], []
+    for a, b in zip(top_a, bottom_b):
+        for c in range(3):
+            i, j = 3 * a + c, n1 + 3 * b + c
+            w = k * (1.0 + 0.1 * rng.random())
+            skew = 0.0 if symmetric else 0.1 * w * rng.standard_normal()
+            rows += [i, j, i, j]
+            cols += [i, j, j, i]
+            vals += [w, w, -w + skew, -w - skew]
+    C = sp.coo_matrix((vals, (rows, cols)), shape=(2 * n1, 2 * n1))
+    K = (sp.block_diag([KA, KB]) + C).tocsr()
+    b = np.zeros(2 * n1)
+    top_b = np.flatnonzero(x[:, 2] == N)
+    b[n1 + 3 * top_b] = 0.3 / top_b.size
+    b[n1 + 3 * top_b + 2] = -1.0 / top_b.size
+    xb = x + [0.0, 0.0, N + 0.1]
+    near_null = sp.block_diag([rigid_body_modes(x), rigid_body_modes(xb)]).toarray()
+    return K, b, near_null
+
+
+def policy(**changes) -> SolverPolicy:
+    return replace(SolverPolicy(), krylov_min_dofs=0, **changes)
+
+
+@pytest.mark.parametrize("symmetric", [True, False])
+def test_amg_krylov_solves_a_body_held_by_contact(symmetric):
+    """CG (symmetric) or GMRES reaches 1e-10 on the true residual in few iterations, with the
+    floating body's rigid motions (stiffness 1e-8 of the diagonal) carried by the near-null
+    space, and its solution is the direct one."""
+    K, b, B = two_bodies(symmetric)
+    M = AMGPreconditioner(K, B, symmetric)
+    x, its, res, ok = krylov_solve(K, b, M, 1e-10, 200, symmetric)
+    assert ok and res <= 1e-10 and its <= 60
+    exact = sp.linalg.spsolve(K.tocsc(), b)
+    assert np.linalg.norm(x - exact) <= 1e-6 * np.linalg.norm(exact)
+    # with pyamg's default near-null space (the translations of each node block) the
+    # rotations are not caught: more iterations (26 against 40 measured, symmetric; 26 and 43)
+    _, its_plain, _, _ = krylov_solve(K, b, AMGPreconditioner(K, None, symmetric), 1e-10, 200, symmetric)
+    assert its_plain > 1.25 * its
+
+
+@pytest.mark.parametrize("symmetric", [True, False])
+def test_preconditioner_is_kept_for_the_next_matrix(symmetric):
+    """A preconditioner built on one Newton matrix solves the next one (contact stiffer by
+    20 %) in few iterations: it is kept, not rebuilt; the solution is that of the new
+    matrix. Inexact Newton's looser tolerance is met, not exceeded by much."""
+    K0, b, B = two_bodies(symmetric, 1.0)
+    K1, _, _ = two_bodies(symmetric, 1.2, seed=1)
+    solves = LinearSolves("auto", B, symmetric, policy=policy())
+    assert solves.path(K0.shape[0]) == KRYLOV
+    solves(K0, b)
+    x = solves(K1, b)
+    assert [h[2] for h in solves.history] == ["new", "kept"]
+    assert np.linalg.norm(K1 @ x - b) <= 1e-10 * np.linalg.norm(b)
+    loose = solves(K1, 2 * b, 1e-4)
+    residual = np.linalg.norm(K1 @ loose - 2 * b) / np.linalg.norm(2 * b)
+    assert residual <= 1e-4 and solves.history[-1][1] < solves.history[-2][1]
+
+
+def test_slow_solve_refreshes_the_preconditioner():
+    """A kept preconditioner that needs more than ``krylov_refresh`` iterations is rebuilt on
+    the current matrix and the solve goes on from where it got."""
+    K0, b, B = two_bodies(True, 1.0)
+    K1, _, _ = two_bodies(True, 30.0, seed=1)        # a far stiffer contact block
+    solves = LinearSolves("auto", B, True, policy=policy(krylov_refresh=3))
+    solves(K0, b)
+    x = solves(K1, b)
+    assert solves.history[-1][2].startswith("refreshed after 3")
+    assert np.linalg.norm(K1 @ x - b) <= 1e-10 * np.linalg.norm(b)
+
+
+def test_stalled_solve_falls_back_to_a_factorization():
+    """A Krylov solve that cannot reach its tolerance even with a fresh preconditioner (here
+    allowed 2 iterations) falls back to a direct factorization of that matrix, logged, and
+    the solution is exact; the same matrix then reuses that factorization."""
+    K, b, B = two_bodies(False)
+    lines: list[str] = []
+    solves = LinearSolves("auto", B, False, policy=policy(krylov_max_iterations=2, krylov_refresh=2),
+                          log=lines.append)
+    x = solves(K, b)
+    assert np.linalg.norm(K @ x - b) <= 1e-8 * np.linalg.norm(b)
+    assert solves.history[-1][0] == DIRECT and solves.history[-1][2] == "fallback"
+    assert any("stalled" in line and "fell back" in line for line in lines)
+    solves(K, 2 * b)
+    assert solves.history[-1][2] == "fallback kept"
+
+
+def test_direct_below_the_size_threshold_and_for_saddle_points():
+    """``auto`` takes the direct path below ``krylov_min_dofs`` and for saddle points; an
+    explicit backend always."""
+    K, b, B = two_bodies(True)
+    n = K.shape[0]
+    assert LinearSolves("auto", B, policy=replace(SolverPolicy(), krylov_min_dofs=n + 1)).path(n) == DIRECT
+    assert LinearSolves("auto", B, policy=policy()).path(n) == KRYLOV
+    assert LinearSolves("auto", B, indefinite=True, policy=policy()).path(n) == DIRECT
+    assert LinearSolves("superlu", B, policy=policy()).path(n) == DIRECT
+
+
+def test_per_body_modes_collapse_to_six_columns_with_the_same_span_per_body():
+    """Two bodies' modes (n, 12), block by block, become (n, 6) whose rows on each body are
+    that body's own modes; columns that mix bodies in a row are left alone."""
+    from cgfem.solve.krylov import collapse_modes
+    _, _, B = two_bodies(True)
+    C = collapse_modes(B)
+    n1 = B.shape[0] // 2
+    assert C.shape == (B.shape[0], 6)
+    np.testing.assert_array_equal(C[:n1], B[:n1, :6])
+    np.testing.assert_array_equal(C[n1:], B[n1:, 6:])
+    mixed = B.copy()
+    mixed[0, 7] = 1.0
+    assert collapse_modes(mixed) is mixed and collapse_modes(B[:, :6]).shape == (B.shape[0], 6)

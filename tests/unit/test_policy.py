@@ -1,0 +1,57 @@
+"""The solver's policy (its tuning constants) and the load stepping with cut-backs."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
+from cgfem.solve.static import StepControl, predict
+
+
+@pytest.mark.parametrize("change", [{"acceleration": "broyden"}, {"predictor": "quadratic"}, {"forcing": -0.1},
+                                    {"floating_step": math.nan}, {"damping_max": 0.5}, {"krylov_refresh": True}])
+def test_policy_refuses_values_that_mean_nothing(change):
+    with pytest.raises(ValueError):
+        replace(DEFAULT_POLICY, **change)
+
+
+def test_policy_is_frozen_and_its_infinite_onset_turns_the_limit_off():
+    policy = SolverPolicy(onset_penetration=math.inf)
+    with pytest.raises(AttributeError):
+        policy.forcing = 0.5
+    assert policy.onset_penetration == math.inf and DEFAULT_POLICY.onset_penetration == 0.1
+
+
+def run_steps(steps: int, max_cutbacks: int, largest: float) -> tuple[list[float], bool]:
+    """The load factors :class:`StepControl` reaches when every increment larger than
+    ``largest`` fails; and whether it reached the end."""
+    control, taken = StepControl(steps, max_cutbacks), []
+    while (t := control.next()) is not None:
+        if t - control.t > largest + 1e-12:
+            if not control.cut_back():
+                return taken, False
+            continue
+        control.accept(t)
+        taken.append(t)
+    return taken, True
+
+
+def test_step_control_halves_a_failed_increment_and_keeps_the_size_that_succeeded():
+    """Two steps of 0.5 where increments above 0.2 fail: each step is halved twice and then
+    reached in sub-steps of 0.125 (not halved again after a success); the size starts again
+    at the step's own in the second step. One cut-back is not enough: the run stops at once."""
+    taken, done = run_steps(2, 2, 0.2)
+    assert done and taken == pytest.approx([0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875, 1.0])
+    assert run_steps(2, 1, 0.2) == ([], False)
+    assert run_steps(4, 0, 0.25) == (pytest.approx([0.25, 0.5, 0.75, 1.0]), True)
+
+
+def test_secant_predictor_is_exact_on_a_linear_path():
+    u0, u1 = np.array([0.0, 1.0]), np.array([0.5, 2.0])      # u(t) = (t, 1 + 2 t) at 0, 0.5
+    np.testing.assert_allclose(predict("secant", 0.5, u1, (0.0, u0), 0.75), [0.75, 2.5])
+    assert predict("none", 0.5, u1, (0.0, u0), 0.75) is None
+    assert predict("secant", 0.5, u1, None, 0.75) is None
