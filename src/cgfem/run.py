@@ -105,9 +105,8 @@ def estimate_memory(case: Case, level: int, measures: dict[str, tuple[float, flo
 
 def check_memory(case: Case, level: int, measures: dict[str, tuple[float, float]],
                  total: int | None = None, order: int = 1) -> None:
-    """Refuse a level whose estimated memory (:func:`estimate_memory`, an upper bound for
-    ``facets`` and ``nurbs_fe``: planar at level 3 is estimated at 19 GiB and peaks at 6 GB)
-    exceeds the machine's physical memory ``total`` (default :func:`machine_memory`). Not the
+    """Refuse a level whose estimated memory (:func:`estimate_memory`, an upper bound;
+    docs/performance.md) exceeds the machine's physical memory ``total`` (default :func:`machine_memory`). Not the
     memory free at the moment: in the pipeline other runs hold some of it while they last."""
     need, dofs = estimate_memory(case, level, measures, order)
     have = machine_memory() if total is None else total

@@ -38,7 +38,7 @@ def first_step(name: str, fraction: float = 1.0):
 
 def solve(case, level: int, surface: str, folder, policy: SolverPolicy) -> tuple[dict, list[str]]:
     lines: list[str] = []
-    status = run_case(case, level, surface, folder, lines.append, policy)
+    status = run_case(case, level, surface, folder, lines.append, policy=policy)
     assert status.status == "converged", status.message
     return json.loads((folder / "summary.json").read_text()), lines
 

@@ -144,7 +144,8 @@ def test_console_script_exit_code_and_no_traceback(tmp_path):
 
 
 def test_check_level_reports_grid_quadrature(tmp_path, capsys):
-    """The JSON contract of DESIGN.md: volume, area, brep_*, elements, nodes per body."""
+    """The JSON contract of ``cgfem check --json``: volume, area, brep_*, elements, nodes per
+    body."""
     assert main(["check", _write(tmp_path, GOOD), "--level", "0", "--json",
                  "--vtu", str(tmp_path / "vtu")]) == 0
     bodies = json.loads(capsys.readouterr().out)["bodies"]
@@ -183,6 +184,25 @@ def test_run_out_on_a_file_is_bad_input(tmp_path, capsys, under):
     assert code == 2
     assert "a file, not a folder" in _one_error_line(capsys, "--out")
     assert existing.read_text() == "not a folder"
+
+
+@pytest.mark.parametrize("order, message", [(3, "must be one of 1, 2, got 3"), (0, "must be one of 1, 2, got 0")])
+def test_unknown_element_order_is_bad_input(tmp_path, capsys, order, message):
+    out = tmp_path / "o"
+    code = main(["run", _write(tmp_path, GOOD), "--level", "0", "--surface", "nurbs_fe", "--out", str(out),
+                 "--order", str(order)])
+    assert code == 2
+    assert message in _one_error_line(capsys, "--order")
+    assert not out.exists()
+
+
+def test_contact_with_order_2_is_refused_until_it_is_implemented(tmp_path, capsys):
+    out = tmp_path / "o"
+    code = main(["run", str(CASES / "chain3.yaml"), "--level", "0", "--surface", "nurbs_fe", "--out", str(out),
+                 "--order", "2"])
+    assert code == 2
+    assert "contact with order 2" in _one_error_line(capsys, "--order")
+    assert not out.exists()
 
 
 def test_refused_run_leaves_no_folder(tmp_path, capsys):

@@ -38,11 +38,9 @@ def partition_min_points(degree: int) -> int:
     The error model of :func:`cgfem.embedding._partition_kernels.gauss_order` follows the
     Bezier piece, not the element: on a cell a fraction of the piece wide it may pick 2 to 4
     points, while the column integrands are polynomials of degree ``3 degree + 1`` in the
-    element's local coordinates. Above degree 2 the minimum is ``2 degree + 2``, measured
-    (degree 4, sphere, torus and half torus of the chain link's size, levels 0-1): 8 points
-    (exact for degree 13 on a flat piece, plus one) left moment errors up to 2e-8 of the
-    element's material measure, 10 leave 1e-9, the level of the trimming curves' adaptive
-    check at the default tolerance (5e-11 at ``tol = 1e-12``). Degree 2 keeps
+    element's local coordinates. Above degree 2 the minimum is ``2 degree + 2`` (10 points at
+    degree 4: moment errors near 1e-9 of the element's material measure, the level of the
+    trimming curves' adaptive check; docs/methods/geometry-and-embedding.md). Degree 2 keeps
     :data:`MIN_POINTS`."""
     return MIN_POINTS if degree <= 2 else 2 * degree + 2
 

@@ -7,9 +7,9 @@ dofs ``u``, and per fitted patch its control displacements ``Z`` and multipliers
     [ 0     Kc     s M   ] [Z ] = [b_Z ]
     [ -s G  s M    0     ] [mu]   [b_mu]
 
-(``Kc`` the contact tangent, which only couples ``Z``). Its factorization fills about five
-times more than the bodies' own matrix, with or without contact (chain3 at level 2: 195M
-factor entries against 36M here), and pyamg cannot take it at all.
+(``Kc`` the contact tangent, which only couples ``Z``). Its factorization fills several
+times more than the bodies' own matrix, with or without contact, and pyamg cannot take it
+at all (docs/performance.md).
 ``M`` is a small banded SPD matrix factorized once per patch, so ``Z`` and ``mu`` are
 eliminated exactly for a given ``u``::
 
@@ -21,9 +21,8 @@ applied matrix-free in a Krylov solver preconditioned by the sparse ``P = K + C~
 ``C~`` holds the exact rows of ``C`` for the controls the contact tangent touches (only those
 enter ``Kc``), each without its entries below :data:`DROP` of its largest: ``M^-1`` of a
 B-spline mass matrix decays fast away from the diagonal, so a row keeps a few knot spans
-around its control: ``P`` stays nearly as sparse as nurbs_fe's matrix (chain2_steel at
-level 2: 1.13 times its nonzeros per unknown at the widest, denser in the contact zone) while ``P^-1 S``
-is close to the identity (GMRES: chain3 16 iterations at level 2, chain2_steel 27). ``P`` is
+around its control: ``P`` stays nearly as sparse as nurbs_fe's matrix while ``P^-1 S`` is
+close to the identity (docs/methods/contact.md). ``P`` is
 factorized by a direct backend (``preconditioner="pardiso"``, ``"superlu"``), which needs
 the memory of the bodies' own factorization instead of the whole saddle point's, or
 coarsened by smoothed-aggregation AMG, one V-cycle per iteration (``"pyamg"``, with CG when
@@ -42,13 +41,7 @@ import scipy.sparse.linalg as spla
 from cgfem.solve.linear import LinearSolver, LinearSolverError, build
 
 #: entries of a row of ``C = M^-1 G`` below this fraction of its largest are left out of the
-#: preconditioner (chain3 at level 1: 1e-2 keeps 30 entries a row where ``G`` has 57, and
-#: GMRES needs 9 iterations; 3e-2 keeps 17 and needs 11; 1e-3, 100 and 6). On chain2_steel's
-#: widest level-2 Newton matrix ``P`` has 119 nonzeros per unknown at 3e-2 (nurbs_fe's matrix
-#: 94) and 104 at 6e-2, GMRES 19 and 27 iterations, the factor 37.7M and 37.1M entries, setup
-#: plus solve 11.3 s and 11.5 s; at 0.1, 98 nonzeros, 39 iterations, 14.6 s; chain3 at level
-#: 2, 14 and 16 iterations at 3e-2 and 6e-2. The factor hardly thins: what fills it is the
-#: contact zone's coupling, which every entry of a row shares
+#: preconditioner (the choice is measured in docs/performance.md)
 DROP = 6e-2
 #: rows of ``C`` computed at once (``M^-1`` applied to that many unit columns)
 ROW_CHUNK = 256

@@ -83,8 +83,7 @@ class StepControl:
     """The load factors of a run: ``steps`` equal steps up to 1, each reached in sub-steps
     when an increment fails. A failure halves the increment (at most ``max_cutbacks``
     times per step); the rest of the step is then taken in sub-steps of the size that
-    succeeded (halving again after every success took 113 sub-steps on a stretch to 5x where
-    4 suffice)."""
+    succeeded, not ever smaller ones (docs/methods/elasticity.md, "Newton")."""
 
     def __init__(self, steps: int, max_cutbacks: int):
         self.steps, self.max_cutbacks = steps, max_cutbacks
