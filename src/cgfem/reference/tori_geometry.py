@@ -162,33 +162,43 @@ def quarter_solid(name: str, spec: TorusSpec):
     return solid
 
 
-def _centreline(spec: TorusSpec, n: int) -> np.ndarray:
-    """(n, 3) points of the centre circle of ``spec`` in the quarter and its kept half."""
+def _centreline(spec: TorusSpec, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points (m, 3) of the centre circle of ``spec`` at the angles ``t`` that lie in the
+    quarter and in the kept half, and those angles (m,)."""
     c = np.asarray(spec.center, float)
     a, e1, e2 = _frame(spec)
-    t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
     p = c + spec.major_radius * (np.cos(t)[:, None] * e1 + np.sin(t)[:, None] * e2)
     keep = (p[:, 0] >= -1e-12) & (p[:, 2] >= -1e-12)
     if isinstance(spec, HalfTorusSpec):
         keep &= (p - c) @ np.asarray(spec.keep) >= -1e-12
-    return p[keep]
+    return p[keep], t[keep]
 
 
-def touch_points(case: Case, n: int = 20000) -> list[np.ndarray]:
+def _closest(s: TorusSpec, m: TorusSpec, ts: np.ndarray, tm: np.ndarray) -> tuple[float, float, float]:
+    ps, ts = _centreline(s, ts)
+    pm, tm = _centreline(m, tm)
+    d = np.linalg.norm(ps[:, None, :] - pm[None, :, :], axis=-1)
+    i, j = np.unravel_index(np.argmin(d), d.shape)
+    return float(d[i, j]), float(ts[i]), float(tm[j])
+
+
+def touch_points(case: Case, n: int = 720, rounds: int = 4) -> list[np.ndarray]:
     """Point (3,) where the tubes of each contact pair of ``case`` are closest in the
     reference configuration (in the quarter): on the segment between the nearest points of
-    the two centre circles, ``r_slave`` from the slave's."""
+    the two centre circles, ``r_slave`` from the slave's. The nearest points are found on
+    ``n`` angles per circle, then ``rounds`` times on ``n`` angles around the best pair in
+    a window ``n / 4`` times narrower (angles to about ``(2 pi / n) (4 / n)^rounds``)."""
     specs, points = _tori(case), []
     for pair in case.contact:
         s, m = specs[pair.slave], specs[pair.master]
-        ps, pm = _centreline(s, n), _centreline(m, n)
-        best = None
-        for chunk in np.array_split(np.arange(len(ps)), max(1, len(ps) // 2000)):
-            d = np.linalg.norm(ps[chunk, None, :] - pm[None, :, :], axis=-1)
-            i, j = np.unravel_index(np.argmin(d), d.shape)
-            if best is None or d[i, j] < best[0]:
-                best = (d[i, j], ps[chunk[i]], pm[j])
-        _, p, q = best
+        width = 2.0 * np.pi
+        _, a, b = _closest(s, m, np.linspace(0.0, width, n, endpoint=False),
+                           np.linspace(0.0, width, n, endpoint=False))
+        for _ in range(rounds):
+            width *= 8.0 / n
+            _, a, b = _closest(s, m, np.linspace(a - width, a + width, n),
+                               np.linspace(b - width, b + width, n))
+        p, q = _centreline(s, np.array([a]))[0][0], _centreline(m, np.array([b]))[0][0]
         points.append(p + s.minor_radius * (q - p) / np.linalg.norm(q - p))
     return points
 
