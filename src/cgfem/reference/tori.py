@@ -29,7 +29,7 @@ for the current case file and copies it (exit 1 with the regenerating command if
 Command line::
 
     python3 -m cgfem.reference.tori --case chain2_steel --out results/reference/chain2_steel.json \\
-        [--meshes 1,2,3,4] [--order 2] [--penalty-factor 1000] [--threads 1]
+        [--meshes 1,2,3,4] [--order 2] [--penalty-factor 10000] [--threads 1]
     python3 -m cgfem.reference.tori --case chain2_steel --from-gold config/reference/chain2_steel.json \\
         --out results/reference/chain2_steel.json
 
@@ -64,7 +64,7 @@ __all__ = ["ACCEPT", "PENALTY_FACTOR", "PENALTY_STEP", "SCHEMA", "StaleGold", "c
 
 SCHEMA = "cgfem-reference-tori/1"
 #: nominal penalty eps = PENALTY_FACTOR E_slave / r_slave and the factor of its check
-PENALTY_FACTOR, PENALTY_STEP = 1000.0, 10.0
+PENALTY_FACTOR, PENALTY_STEP = 1.0e4, 10.0
 #: acceptance: mesh and penalty changes of the reactions below this (relative)
 ACCEPT = 0.003
 #: the modules whose sources make the script version

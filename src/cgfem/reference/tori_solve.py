@@ -28,9 +28,11 @@ Discretization (:mod:`cgfem.reference.tori_geometry` for the geometry):
 Reported per step (the whole chain, from the quarter by symmetry: y components times 4, x
 and z components zero): the reaction (N) of every support entry, keyed like cgFEM's
 ``body/patch+patch`` (force of the support on the body), the contact force of every pair
-(force of the master on the slave) and on the master, the peak von Mises stress (Pa,
-Cauchy) of every body on a lattice of points per element and where it is (reference
-coordinates, in the quarter).
+(force of the master on the slave) and on the master, the equilibrium of every body
+(largest resultant of its support and contact forces relative to the largest support
+force), the peak von Mises stress (Pa, Cauchy) of every body on a lattice of points per
+element and where it is (reference coordinates, in the quarter), also on either side of
+the body's centre plane ``y = c_y``.
 """
 
 from __future__ import annotations
@@ -75,6 +77,8 @@ class StepResult:
     contact: dict[str, dict]
     max_von_mises: dict[str, float]
     max_von_mises_at: dict[str, list[float]]
+    max_von_mises_sides: dict[str, dict[str, list[float]]]
+    equilibrium: float
     newton_iterations: int
     residual: float
     residual_reference: float
@@ -368,9 +372,11 @@ class ToriProblem:
             out[name] = SYMMETRY_FACTOR * k * float(uy)
         return out
 
-    def peak_von_mises(self, lattice: int | None = None) -> tuple[dict, dict]:
+    def peak_von_mises(self, lattice: int | None = None) -> tuple[dict, dict, dict]:
         """Peak von Mises stress (Pa) of every body on the lattice points ``(i, j, k) / n``
-        of every element (``n = 2 p``, vertices included) and its reference position."""
+        of every element (``n = 2 p``, vertices included), its reference position, and
+        ``[peak, x, y, z]`` on each side of the body's centre plane ``y = c_y`` that holds
+        material (``below``, ``above``: the two contacts of a middle link)."""
         ng = self.ng
         from ngsolve.fem import IntegrationRule
 
@@ -378,17 +384,35 @@ class ToriProblem:
         pts = [(i / n, j / n, k / n) for i in range(n + 1) for j in range(n + 1 - i)
                for k in range(n + 1 - i - j)]
         rule = IntegrationRule(pts, [0.0] * len(pts))
-        peak, where = {}, {}
+        peak, where, sides = {}, {}, {}
         for name in self.bodies:
             s = self.stress(name)
             dev = s - ng.Trace(s) / 3 * ng.Id(3)
             vm = ng.sqrt(1.5 * ng.InnerProduct(dev, dev))
             points = self.mesh.MapToAllElements(rule, self.mesh.Materials(name))
             values = np.asarray(vm(points)).ravel()
+            x = np.asarray(ng.CF((ng.x, ng.y, ng.z))(points)).reshape(-1, 3)
             i = int(np.argmax(values))
-            peak[name] = float(values[i])
-            where[name] = [float(v) for v in np.asarray(ng.CF((ng.x, ng.y, ng.z))(points))[i]]
-        return peak, where
+            peak[name], where[name] = float(values[i]), [float(v) for v in x[i]]
+            cy = self.bodies[name].geometry.center[1]
+            sides[name] = {}
+            for side, mask in (("below", x[:, 1] < cy), ("above", x[:, 1] > cy)):
+                if mask.sum():
+                    j = np.flatnonzero(mask)[int(np.argmax(values[mask]))]
+                    sides[name][side] = [float(values[j]), *(float(v) for v in x[j])]
+        return peak, where, sides
+
+    def equilibrium(self, reactions: dict, contact: dict) -> float:
+        """Largest resultant (y) of the support and contact forces on one body, relative to
+        the largest support force: zero at equilibrium."""
+        total = {name: 0.0 for name in self.bodies}
+        for bc, key in self._supports:
+            total[bc.body] += reactions[key][1]
+        for key, pair, *_ in self.pairs:
+            total[pair.slave] += contact[key]["force"][1]
+            total[pair.master] += contact[key]["on_master"][1]
+        scale = max(abs(v[1]) for v in reactions.values())
+        return max(abs(v) for v in total.values()) / scale
 
     def run(self, *, steps: int | None = None, tol: float = 1e-11, max_iterations: int = 40,
             max_cutbacks: int = 6, log: Callable[[str], None] = lambda s: None,
@@ -408,9 +432,11 @@ class ToriProblem:
                 converged, message = False, f"step {k} failed after {cuts} cut-backs"
                 log(f"  {message}")
                 break
-            peak, where = self.peak_von_mises()
-            step = StepResult(k / n_steps, self.reactions(), self.contact_forces(), peak, where,
-                              its, rn, ref, cuts, time.perf_counter() - ts, self.spring_forces())
+            peak, where, sides = self.peak_von_mises()
+            reactions, contact = self.reactions(), self.contact_forces()
+            step = StepResult(k / n_steps, reactions, contact, peak, where, sides,
+                              self.equilibrium(reactions, contact), its, rn, ref, cuts,
+                              time.perf_counter() - ts, self.spring_forces())
             results.append(step)
             log("  step {}/{}: {} ({} iterations, {:.1f} s)".format(
                 k, n_steps, ", ".join(f"{key} F_y = {v[1]:.6e} N" for key, v in step.reactions.items()),
