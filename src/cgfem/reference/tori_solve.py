@@ -101,6 +101,9 @@ class Solution:
     seconds: dict[str, float]
     converged: bool
     message: str = ""
+    #: the same steps with the penalty times ``check_factor``, each from this solution's
+    #: converged state of the step (None unless asked for)
+    check: "Solution | None" = None
 
     def as_dict(self) -> dict:
         return {"mesh": self.mesh, "penalty_factor": self.penalty_factor,
@@ -153,6 +156,7 @@ class ToriProblem:
                 spring = spring + k / 2 * ng.InnerProduct(trial, trial) * ng.dx(definedon=mesh.Materials(name))
             self.a_spring += ng.Variation(spring)
         self.penalties, self.pairs = {}, []
+        self.penalty_scale = ng.Parameter(1.0)
         for pair in case.contact:
             slave = self.bodies[pair.slave]
             eps = self.penalty_factor * slave.material.E / slave.geometry.minor_radius
@@ -180,7 +184,7 @@ class ToriProblem:
                                 self.mesh.Boundaries(tube(pair.master)))
         X = ng.CF((ng.x, ng.y, ng.z))
         g = (X + u - (X.Other() + u.Other())) * cb.normal
-        cb.AddEnergy(ng.IfPos(g, eps / 2 * g * g, 0))
+        cb.AddEnergy(ng.IfPos(g, eps * self.penalty_scale / 2 * g * g, 0))
         return cb
 
     def stress(self, name: str, u=None):
@@ -307,9 +311,11 @@ class ToriProblem:
     def solve_step(self, start: float, target: float, previous: np.ndarray, tol: float,
                    max_iterations: int, max_cutbacks: int, log: Callable[[str], None]
                    ) -> tuple[bool, int, int, float, float]:
-        """Move from the converged state at load factor ``start`` (``previous``: u of the
-        step before, for the predictor) to ``target``, halving the increment on failure.
-        Returns (converged, iterations, cutbacks, residual, reference residual)."""
+        """Move from the converged state at load factor ``start`` to ``target``, halving
+        the increment on failure. ``previous`` is ``[u, load factor]`` of the converged
+        state before (``[None, None]`` at the first step; updated here): the predictor
+        extrapolates linearly from it. Returns (converged, iterations, cutbacks, residual,
+        reference residual)."""
         u = self.u.vec.FV().NumPy()
         cutbacks, total, reached = 0, 0, start
         increment = target - start
@@ -415,15 +421,20 @@ class ToriProblem:
         return max(abs(v) for v in total.values()) / scale
 
     def run(self, *, steps: int | None = None, tol: float = 1e-11, max_iterations: int = 40,
-            max_cutbacks: int = 6, log: Callable[[str], None] = lambda s: None,
-            t_build: float = 0.0) -> Solution:
+            max_cutbacks: int = 6, check_factor: float | None = None,
+            log: Callable[[str], None] = lambda s: None, t_build: float = 0.0) -> Solution:
         """Solve through the load steps (``steps`` of them if given, else the case's; load
-        factor ``k / steps``) from the rest state; stops at the first step that fails."""
+        factor ``k / steps``) from the rest state; stops at the first step that fails.
+        With ``check_factor``, every converged step is solved again with the penalty times
+        ``check_factor``, starting from its converged state (a continuation in the penalty:
+        the stiffer penalty only closes the penetration), into ``Solution.check``; the
+        next step goes on from the nominal state."""
         t0 = time.perf_counter()
         numbers = self.mesh_numbers()
         log(f"  mesh: {numbers['elements']} elements, {numbers['dofs']} dofs (order {self.spec.order})")
         n_steps = steps or self.case.steps
         results, previous, converged, message = [], [None, None], True, ""
+        checked, check_ok, check_message, t_check = [], check_factor is not None, "", 0.0
         for k in range(1, n_steps + 1):
             ts = time.perf_counter()
             ok, its, cuts, rn, ref = self.solve_step((k - 1) / n_steps, k / n_steps, previous, tol,
@@ -432,19 +443,45 @@ class ToriProblem:
                 converged, message = False, f"step {k} failed after {cuts} cut-backs"
                 log(f"  {message}")
                 break
-            peak, where, sides = self.peak_von_mises()
-            reactions, contact = self.reactions(), self.contact_forces()
-            step = StepResult(k / n_steps, reactions, contact, peak, where, sides,
-                              self.equilibrium(reactions, contact), its, rn, ref, cuts,
-                              time.perf_counter() - ts, self.spring_forces())
-            results.append(step)
+            results.append(self._record(k / n_steps, its, rn, ref, cuts, time.perf_counter() - ts))
             log("  step {}/{}: {} ({} iterations, {:.1f} s)".format(
-                k, n_steps, ", ".join(f"{key} F_y = {v[1]:.6e} N" for key, v in step.reactions.items()),
-                its, step.seconds))
-        seconds = {"build": t_build, "solve": time.perf_counter() - t0,
-                   "total": t_build + time.perf_counter() - t0}
+                k, n_steps, ", ".join(f"{key} F_y = {v[1]:.6e} N"
+                                      for key, v in results[-1].reactions.items()), its,
+                results[-1].seconds))
+            if check_ok:
+                tc = time.perf_counter()
+                u = self.u.vec.FV().NumPy()
+                saved = u.copy()
+                self.penalty_scale.Set(check_factor)
+                check_ok, its, rn, ref = self.newton(self.a, tol, max_iterations, log)
+                if check_ok:
+                    checked.append(self._record(k / n_steps, its, rn, ref, 0, time.perf_counter() - tc))
+                    log(f"  step {k}/{n_steps} with the penalty times {check_factor:g}: "
+                        + ", ".join(f"{key} F_y = {v[1]:.6e} N" for key, v in checked[-1].reactions.items()))
+                else:
+                    check_message = f"step {k} failed with the penalty times {check_factor:g}"
+                    log(f"  {check_message}")
+                self.penalty_scale.Set(1.0)
+                u[:] = saved
+                t_check += time.perf_counter() - tc
+        seconds = {"build": t_build, "solve": time.perf_counter() - t0 - t_check,
+                   "total": t_build + time.perf_counter() - t0 - t_check}
+        check = None
+        if check_factor is not None:
+            check = Solution(numbers, self.penalty_factor * check_factor,
+                             {k: v * check_factor for k, v in self.penalties.items()}, checked,
+                             {"check": t_check}, check_ok and converged, check_message)
         return Solution(numbers, self.penalty_factor, self.penalties, results, seconds, converged,
-                        message)
+                        message, check)
+
+    def _record(self, load_factor: float, its: int, rn: float, ref: float, cuts: int,
+                seconds: float) -> StepResult:
+        """The values of the converged state at ``load_factor``."""
+        peak, where, sides = self.peak_von_mises()
+        reactions, contact = self.reactions(), self.contact_forces()
+        return StepResult(load_factor, reactions, contact, peak, where, sides,
+                          self.equilibrium(reactions, contact), its, rn, ref, cuts, seconds,
+                          self.spring_forces())
 
     def contact_work(self, key: str, field) -> float:
         """Work (J, whole chain) of the contact traction of pair ``key`` (``slave/master``) on
@@ -468,12 +505,15 @@ class ToriProblem:
 
 def solve(case: Case, spec: MeshSpec, penalty_factor: float, *, tol: float = 1e-11,
           max_iterations: int = 40, max_cutbacks: int = 6, steps: int | None = None,
-          contact_order: int | None = None, log: Callable[[str], None] = lambda s: None) -> Solution:
+          contact_order: int | None = None, check_factor: float | None = None,
+          log: Callable[[str], None] = lambda s: None) -> Solution:
     """Solve ``case`` on the quarter mesh ``spec`` with penalty ``penalty_factor`` through
     its load steps (``steps`` of them if given, else the case's; load factor ``k / steps``),
     the contact integrated with a rule of order ``contact_order`` on the slave's surface
-    elements (default ``CONTACT_ORDER_PER_P p``)."""
+    elements (default ``CONTACT_ORDER_PER_P p``); with ``check_factor`` also every step with
+    the penalty times it (:meth:`ToriProblem.run`)."""
     t0 = time.perf_counter()
     problem = ToriProblem(case, spec, penalty_factor, contact_order)
     return problem.run(steps=steps, tol=tol, max_iterations=max_iterations,
-                       max_cutbacks=max_cutbacks, log=log, t_build=time.perf_counter() - t0)
+                       max_cutbacks=max_cutbacks, check_factor=check_factor, log=log,
+                       t_build=time.perf_counter() - t0)
