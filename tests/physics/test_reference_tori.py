@@ -30,7 +30,9 @@ def test_chain3_on_the_coarsest_mesh_is_in_equilibrium():
     support forces balance the contact forces on it to 1e-8 of the load, the chain is in
     tension, and the spring that held the middle link while contact closed is gone."""
     case = load_case(REPO / "config" / "cases" / "chain3.yaml")
-    solution = solve(case, mesh_level(0), PENALTY_FACTOR)
+    # a tenth of the references' penalty: the balance is a property of any penalty, and
+    # the softer one keeps the round-off of the residual (about 2e-9 here) further below 1e-8
+    solution = solve(case, mesh_level(0), PENALTY_FACTOR / 10)
     assert solution.converged, solution.message
     step = solution.steps[-1]
     pulled, clamped = step.reactions[PULLED][1], step.reactions[CLAMPED][1]
@@ -41,6 +43,7 @@ def test_chain3_on_the_coarsest_mesh_is_in_equilibrium():
     assert abs(clamped + lower["on_master"][1]) <= 1e-8 * load  # link_a: support + link_c on it
     assert abs(lower["force"][1] + upper["on_master"][1]) <= 1e-8 * load  # link_c: a and b on it
     assert abs(pulled + clamped) <= 1e-8 * load
+    assert step.equilibrium <= 1e-8
     # the spring that held link_c until contact closed would carry this much were it still
     # there: far above the 1e-8 the balance of link_c above allows, so the balance shows it gone
     assert step.spring_force["link_c"] > 1e-5 * load
