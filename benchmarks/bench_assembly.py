@@ -43,7 +43,7 @@ import sys
 import time
 
 import numpy as np
-from _memory import reset_peak, status_kib
+from benchmarks._memory import reset_peak, status_kib
 
 N_CUBE = 32                      # elements per edge of the unit cube
 E_MOD, NU = 1.0, 0.3             # material (the matrices scale linearly with E)
@@ -201,7 +201,7 @@ def ours(mesh: str) -> dict:
     def per_point():
         data = pattern.zeros()
         for elements in pattern.colours:
-            kern.integrate_tangent(A, -1, points.xi, points.w, points.offsets, h, elements,
+            kern.integrate_tangent(*space.kernel_element, A, -1, points.xi, points.w, points.offsets, h, elements,
                                    pattern.scatter, data)
         return pattern.matrix(data)
 
@@ -361,7 +361,7 @@ WORKERS = {
 def run_worker(name: str, timeout: float = 400.0) -> dict:
     t0 = time.perf_counter()
     try:
-        proc = subprocess.run([sys.executable, os.path.abspath(__file__), "--worker", name],
+        proc = subprocess.run([sys.executable, "-m", "benchmarks.bench_assembly", "--worker", name],
                               capture_output=True, text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
         return {"skipped": f"timed out after {timeout:.0f} s"}

@@ -1,10 +1,10 @@
 """Contact benchmarks of issue 11 on ``config/cases/chain2_steel.yaml`` (two Neo-Hookean
 half-torus links; link_b's tube is the slave, link_a's tube the master).
 
-    python3 benchmarks/bench_contact.py                       # all three parts
-    python3 benchmarks/bench_contact.py --quick               # under a minute
-    python3 benchmarks/bench_contact.py --parts search --points 100000 --search-level 1
-    python3 benchmarks/bench_contact.py --parts iteration --levels 1 2 3
+    python3 -m benchmarks.bench_contact                       # all three parts
+    python3 -m benchmarks.bench_contact --quick               # under a minute
+    python3 -m benchmarks.bench_contact --parts search --points 100000 --search-level 1
+    python3 -m benchmarks.bench_contact --parts iteration --levels 1 2 3
 
 1. **search**: ``--points`` rays against link_a's tube embedded at ``--search-level``,
    deformed by a smooth random displacement field (amplitude 0.2 h). The rays come from
@@ -140,7 +140,7 @@ def search_rays(nurbs, u: np.ndarray, tube: int, n: int, seed: int):
 def part_search(level: int, n_points: int, n_brute: int) -> dict:
     from scipy.spatial import cKDTree
 
-    from _search_peer import brute_force_search
+    from benchmarks._search_peer import brute_force_search
     from cgfem.contact.pair import MAX_GAP_H
 
     tic = time.perf_counter()
@@ -439,8 +439,8 @@ def child(argv: list[str]) -> None:
 
 def in_child(*args) -> dict:
     """Run ``--child args`` in a fresh process; its JSON, or ``{"skipped": reason}``."""
-    proc = subprocess.run([sys.executable, __file__, "--child", *map(str, args)], capture_output=True,
-                          text=True, cwd=Path(__file__).parent)
+    proc = subprocess.run([sys.executable, "-m", "benchmarks.bench_contact", "--child", *map(str, args)], capture_output=True,
+                          text=True, cwd=ROOT)
     if proc.returncode != 0:
         lines = proc.stderr.strip().splitlines() or ["(no message)"]
         return {"skipped": lines[-1]}

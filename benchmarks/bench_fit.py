@@ -8,7 +8,7 @@ time, time per Newton iteration and the peak resident memory. The last lines giv
 nurbs_fit / nurbs_fe measured in the same run (targets: time <= 3x, memory <= 2x, nonzeros
 per unknown within 20 %).
 
-    python3 benchmarks/bench_fit.py [--parallel] [--first-step] [levels ...]   # default: 1 2
+    python3 -m benchmarks.bench_fit [--parallel] [--first-step] [levels ...]   # default: 1 2
 
 ``--parallel``: the two definitions of a level run at once, one thread each (2 cores: at
 level 3 nurbs_fe takes 48 min and nurbs_fit 68 min); both then share the machine alike, so
@@ -85,7 +85,7 @@ def one_run(level: int, surface: str, folder: Path, first_step: bool = False, ve
 
 def _child(level: int, surface: str, tmp: str, env: dict | None, first_step: bool,
            verbose: bool) -> subprocess.Popen:
-    code = (f"import json, sys; sys.path.insert(0, {str(REPO / 'benchmarks')!r}); import bench_fit; "
+    code = (f"import json; from benchmarks import bench_fit; "
             f"from pathlib import Path; "
             f"print(json.dumps(bench_fit.one_run({level}, {surface!r}, Path({tmp!r}), {first_step!r}, {verbose!r})))")
     # verbose: the child's log goes straight to this process's stderr (its errors too)

@@ -4,7 +4,7 @@ For each level: DOFs, cut elements, time to build (geometry, embedding, models) 
 Newton iterations, outer passes, the linear backend `auto` chose, the pulled cap's reaction
 and the peak memory of the run (each level in its own process, so peaks do not mix).
 
-    python3 benchmarks/bench_run.py [max_level] [surface]
+    python3 -m benchmarks.bench_run [max_level] [surface]
 """
 
 from __future__ import annotations
@@ -70,7 +70,7 @@ def main() -> None:
           f"{'reaction y N':>13} {'peak MiB':>9}")
     for level in range(max_level + 1):
         with tempfile.TemporaryDirectory() as tmp:
-            out = subprocess.run([sys.executable, __file__, "--child", str(level), surface, tmp],
+            out = subprocess.run([sys.executable, "-m", "benchmarks.bench_run", "--child", str(level), surface, tmp],
                                  capture_output=True, text=True, check=True)
             r = json.loads(out.stdout.strip().splitlines()[-1])
         print(f"{r['level']:>5} {r['dofs']:>8} {r['cut']:>6} {r['build_s']:>8.2f} {r['solve_s']:>8.2f} "

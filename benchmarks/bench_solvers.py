@@ -23,10 +23,9 @@ import resource
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
-from _memory import reset_peak, status_kib
+from benchmarks._memory import reset_peak, status_kib
 
 SUPERLU_BUDGET_S = 120.0  # superlu is skipped above SUPERLU_ALWAYS_DOFS when expected slower
 SUPERLU_ALWAYS_DOFS = 100_000
@@ -34,8 +33,7 @@ SUPERLU_ALWAYS_DOFS = 100_000
 
 def run_one(backend: str, n: int) -> dict:
     """Time one backend on the n^3 cube (runs in the child process)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-    import elasticity_fixture as fx
+    from tests.support import elasticity_fixture as fx
 
     from cgfem.solve.linear import factorize, rigid_body_modes
 
@@ -102,7 +100,7 @@ def main(sizes: list[int]) -> None:
                           flush=True)
                     continue
             t = time.perf_counter()
-            proc = subprocess.run([sys.executable, __file__, "--one", backend, str(n)],
+            proc = subprocess.run([sys.executable, "-m", "benchmarks.bench_solvers", "--one", backend, str(n)],
                                   capture_output=True, text=True, timeout=3600)
             if proc.returncode != 0:
                 last = (proc.stderr.strip().splitlines() or ["(no message)"])[-1]

@@ -24,7 +24,7 @@ Measured: P; a_edge = p^2 ~ (a - x) extrapolated from the last two contact nodes
 int_x p dx ~ (a-x)^1.5, on [0.9, 1] x last contact node (much less noisy); a_moment = 2 sqrt(int
 p x^2 / int p); p_max = p(0); each over Hertz at the measured P; Richardson on the last three.
 
-Usage: python3 benchmarks/hertz_reference.py [--R 1] [--delta 0.05] [--width 1] [--depth 1]
+Usage: python3 -m benchmarks.hertz_reference [--R 1] [--delta 0.05] [--width 1] [--depth 1]
        [--E-ratio 1] [--levels 4] [--h-contact H] [--pressure-out FILE.csv]
 """
 
@@ -32,10 +32,8 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
@@ -384,8 +382,7 @@ def fitted_ellipse(x: Arr, p: Arr) -> tuple[float, float]:
     """(p0, a) of the weighted least-squares ellipse the cgFEM tests fit to their contact
     points (``tests/hertz_setup.fit_ellipse``), here over nodal pressures at x >= 0 sampled
     linearly at 20001 even points and mirrored to x < 0."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-    from hertz_setup import fit_ellipse
+    from tests.support.hertz_setup import fit_ellipse
     xs = np.linspace(0.0, x.max(), 20001)
     ps = np.interp(xs, x, p)
     w = np.full(xs.size, xs[1] - xs[0])

@@ -3,7 +3,7 @@ pressure p0 against the closed form and the converged reference, per level and s
 definition, with run times.
 
 The setups and the measurement are those of ``tests/hertz_setup.py`` (``--setup equal``:
-``tests/test_contact_hertz.py``; ``--setup indenter``: ``tests/test_contact_hertz_indenter.py``).
+``tests/physics/test_contact_hertz.py``; ``--setup indenter``: ``tests/physics/test_contact_hertz_indenter.py``).
 Usage: ``python benchmarks/hertz_table.py [--setup equal|indenter] [--levels 0 1 2 3] [--out DIR]``.
 
 Columns: P (N/m, measured contact load) and its error against the reference's load; a and p0
@@ -22,15 +22,13 @@ reach the block) is printed as such.
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from hertz_setup import EQUAL, INDENTER, SURFACES, solve  # noqa: E402
+from tests.support.hertz_setup import EQUAL, INDENTER, SURFACES, solve
 
 SETUPS = {"equal": EQUAL, "indenter": INDENTER}
 

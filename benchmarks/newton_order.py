@@ -10,10 +10,10 @@ exact only once that ratio has settled).
 
 The residual is only a proxy for the error: the contact penalty next to nearly free sliding
 makes ``r_{k+1} / r_k^2`` swing (chain2_steel level 1 facets: 16 then 94 in step 1), so the
-order from residuals can read below 2 on a consistent tangent. ``tests/test_newton_order.py``
+order from residuals can read below 2 on a consistent tangent. ``tests/physics/test_newton_order.py``
 measures the order on the error ``|u_k - u*|`` instead (each solve continued to round-off).
 
-    python3 benchmarks/newton_order.py results/runs/chain2_steel/L1_facets results/runs/chain2_steel/L1_nurbs_fe
+    python3 -m benchmarks.newton_order results/runs/chain2_steel/L1_facets results/runs/chain2_steel/L1_nurbs_fe
 """
 
 from __future__ import annotations

@@ -2,9 +2,18 @@
 
 Stages, each a subpackage with a small typed interface (data flows one way):
 
-- :mod:`cgfem.geometry` — exact NURBS boundary representation of each body;
 - :mod:`cgfem.case` — case files (YAML) validated and loaded into frozen dataclasses;
+- :mod:`cgfem.geometry` — exact NURBS boundary representation of each body;
+- :mod:`cgfem.embedding` — Cartesian grids, cut-cell volume and boundary quadrature;
+- :mod:`cgfem.fem` — the H8 field of each body and every term acting on it;
+- :mod:`cgfem.contact` — contact pairs, surface definitions, gap, residual and tangent;
+- :mod:`cgfem.solve` — load steps, the outer loop, Newton and the linear solvers;
+- :mod:`cgfem.run` and :mod:`cgfem.results` — from a case file to the result files;
+- :mod:`cgfem.report` and :mod:`cgfem.reference` — figures, claims and the planar reference;
 - :mod:`cgfem.cli` — the ``cgfem`` command line.
+
+The methods and the reasons behind them are described in docs/methods/ (geometry and
+embedding, elasticity, contact); the evidence in docs/validation.md.
 
 Importing the package first installs :mod:`cgfem._numba_cache`, which stamps every cached
 numba kernel with the sources of its module and of every ``cgfem`` module it imports (so a

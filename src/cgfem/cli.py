@@ -7,12 +7,15 @@ every body in its grid of that level and prints the element counts and the volum
 of the quadrature of the surface definition ``S``. Exit codes: 0 success, 2 bad input (one
 line on stderr naming the offending field, no traceback).
 
-``cgfem run CASE.yaml --level L --surface S --out DIR`` solves the case and writes
+``cgfem run CASE.yaml --level L --surface S --out DIR [--order P]`` solves the case with
+hexahedra of order ``P`` (1, default, or 2) and writes
 ``DIR/summary.json``, ``DIR/step_NNN.vtu`` and ``DIR/surface_NNN.vtu`` (:mod:`cgfem.run`),
 with a progress line per Newton iteration and per step on stderr. Exit codes: 0 converged
 (status ``converged``), 1 not converged (status ``failed``: Newton failed, the converged
 steps are written; or ``outer_not_converged``: every step solved but the outer loop of at
-least one stopped at ``solver.outer_passes`` above ``solver.outer_tol``), 2 bad input.
+least one stopped at ``solver.outer_passes`` above ``solver.outer_tol``), 2 bad input, 130
+or 143 interrupted by SIGINT or SIGTERM (status ``interrupted``: the converged steps are
+written, and ``summary.json`` says where the run stopped).
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ from dataclasses import dataclass
 
 from cgfem import __version__
 from cgfem.case.model import SURFACES
-from cgfem.errors import InputError
+from cgfem.errors import InputError, RunInterrupted
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -158,30 +161,35 @@ def _cmd_run(args: argparse.Namespace) -> int:
     import time
 
     from cgfem.case.load import load_case
-    from cgfem.run import run_case
+    from cgfem.errors import RunInterrupted
+    from cgfem.run import INTERRUPTED, run_case
     from cgfem.solve.static import CONVERGED
 
     case = load_case(args.case)
     start = time.perf_counter()
-    interrupted = []
+    received: list[int] = []
 
-    def on_interrupt(signum, frame) -> None:
-        # stop at the next progress point, outside compiled code; a second Ctrl-C at once
-        if interrupted:
-            raise KeyboardInterrupt
-        interrupted.append(signum)
+    def on_signal(signum, frame) -> None:
+        # stop at the next progress point, outside compiled code; a second signal at once
+        if received:
+            raise RunInterrupted(signum)
+        received.append(signum)
 
     def log(message: str) -> None:
-        if interrupted:
-            raise KeyboardInterrupt
+        if received:
+            raise RunInterrupted(received[0])
         if not args.quiet:
             print(f"[{time.perf_counter() - start:8.2f} s] {message}", file=sys.stderr, flush=True)
 
-    previous = signal.signal(signal.SIGINT, on_interrupt)
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        status = run_case(case, args.level, args.surface, args.out, log)
+        status = run_case(case, args.level, args.surface, args.out, log, args.order)
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    if status.status == INTERRUPTED:
+        print(f"cgfem: interrupted ({status.message}); {status.summary}", file=sys.stderr)
+        return 128 + status.signum
     log(f"{status.status}: {status.summary}" + (f" ({status.message})" if status.message else ""))
     return EXIT_OK if status.status == CONVERGED else EXIT_FAILED
 
@@ -227,6 +235,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--surface", choices=sorted(SURFACES), required=True, help=SURFACE_HELP)
     run.add_argument("--out", required=True, metavar="DIR",
                      help="result folder (created when the run starts; must not be a file)")
+    run.add_argument("--order", type=int, default=1,
+                     help="element order: 1, the trilinear hexahedron (default, the paper's), or 2, "
+                          "the triquadratic one (27 nodes; not yet with contact)")
     run.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     run.set_defaults(func=_cmd_run)
     warmup = sub.add_parser("warmup", help="compile and cache the numba kernels (two small contact "
@@ -243,9 +254,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except InputError as err:
         print(f"cgfem: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except KeyboardInterrupt:  # the files written so far are complete; no summary.json yet
+    except (KeyboardInterrupt, RunInterrupted) as stop:  # before any step: nothing written
         print("cgfem: interrupted", file=sys.stderr)
-        return 130
+        return 128 + getattr(stop, "signum", 2)
     except BrokenPipeError:  # output piped into a pager or `head` that stopped reading
         sys.stdout = None
         return EXIT_OK

@@ -1,4 +1,5 @@
-"""Errors that the command line reports as bad input (exit code 2)."""
+"""Errors the command line reports: bad input (exit code 2) and an interrupted run
+(exit code 128 + the signal's number)."""
 
 from __future__ import annotations
 
@@ -23,3 +24,12 @@ class InputError(ValueError):
 
     def __str__(self) -> str:
         return f"{self.field}: {self.message}" if self.field else self.message
+
+
+class RunInterrupted(Exception):
+    """A run stopped by a signal (SIGINT or SIGTERM) at a progress point: ``signum`` is the
+    signal's number; the command line exits with ``128 + signum``."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = int(signum)

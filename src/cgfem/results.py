@@ -1,5 +1,6 @@
 """Result files of a run: ``summary.json``, ``step_NNN.vtu``, ``surface_NNN.vtu`` and
-``boundary_NNN.vtu`` (DESIGN.md contracts; README "Result files" lists every field).
+``boundary_NNN.vtu`` (README "Result files" lists every field; the keys other tools rely on
+are fixed, new ones may be added).
 
 Every file is written to a hidden temporary name next to its target, flushed, then renamed
 onto it, so a reader never sees a partial file. ``summary.json`` is written last: a folder
@@ -42,7 +43,9 @@ def clear_previous(folder: Path) -> None:
 def step_mesh(bodies: list[dict]) -> meshio.Mesh:
     """One hexahedral mesh holding the active elements of every body.
 
-    ``bodies``: dicts with node ``points`` (n, 3), H8 ``cells`` (m, 8), nodal ``displacement``
+    ``bodies``: dicts with node ``points`` (n, 3), ``cells`` (m, n_nodes) in the element's
+    node order and ``cell_type`` (``hexahedron`` or ``hexahedron27``, one for all bodies; a
+    dict without it is ``hexahedron``), nodal ``displacement``
     (n, 3), nodal ``stress`` (n, 3, 3, recovered Cauchy), nodal ``von_mises_nodal`` (n,),
     per-element ``status`` (m,) and ``von_mises_max_qp`` (m,).
     """
@@ -59,7 +62,10 @@ def step_mesh(bodies: list[dict]) -> meshio.Mesh:
         _append(cell_data, "status", b["status"].astype(np.int32))
         _append(cell_data, "von_mises_max_qp", b["von_mises_max_qp"])
         _append(cell_data, "body", np.full(c.shape[0], index, np.int32))
-    mesh = meshio.Mesh(np.concatenate(points), [("hexahedron", np.concatenate(cells))],
+    types = {b.get("cell_type", "hexahedron") for b in bodies}
+    if len(types) != 1:
+        raise ValueError(f"bodies of different element types in one step mesh: {sorted(types)}")
+    mesh = meshio.Mesh(np.concatenate(points), [(types.pop(), np.concatenate(cells))],
                        point_data={k: np.concatenate(v) for k, v in point_data.items()},
                        cell_data={k: [np.concatenate(v)] for k, v in cell_data.items()})
     return mesh

@@ -8,12 +8,15 @@ estimated from the B-rep volume and area and refused if the machine does not hav
 
 from __future__ import annotations
 
+import os
 import platform
+import signal
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+import numba
 import numpy as np
 
 from cgfem import __version__
@@ -24,29 +27,46 @@ from cgfem.contact.assembly import summary as contact_summary
 from cgfem.contact.build import DEFINITIONS as CONTACT_DEFINITIONS, build_pair
 from cgfem.contact.fit import FIT_NAME_SEPARATOR, fit_mesh, write_fit_json, write_fit_vtu
 from cgfem.contact.output import write_contact
-from cgfem.errors import InputError
+from cgfem.errors import InputError, RunInterrupted
 from cgfem.fem.body import BodyModel, boundary_of
+from cgfem.fem.element import ORDERS, hexahedron
 from cgfem.fem.materials import von_mises
 from cgfem.fem import spr
 from cgfem.fem.spr import energy_norm, zz_estimate
 from cgfem.geometry.builders import build_solid
 from cgfem.geometry.measure import areas_by_name, volume
 from cgfem.results import clear_previous, write_json_atomic, write_step
-from cgfem.solve.linear import available_backends
+from cgfem.solve.linear import available_backends, mkl_threads
 from cgfem.solve.static import StepRecord, System, solve_static
 
-#: bytes per inside and per cut element: pattern scatter map, quadrature, tangent data and
-#: the factorization's fill. Calibrated on the Neo-Hookean half torus at level 3 (86k DOFs,
-#: 16.6k inside + 7.7k cut elements, PARDISO): peak 3.1 GiB; this estimate gives 3.5 GiB.
+#: bytes per inside and per cut trilinear element: pattern scatter map, quadrature, tangent
+#: data and the factorization's fill (calibrated on the Neo-Hookean half torus at level 3 with
+#: PARDISO, an upper bound of its peak; docs/performance.md)
 BYTES_PER_ELEMENT = 90_000
 BYTES_PER_CUT_ELEMENT = 180_000
+#: the memory of an element of each order relative to the trilinear one: 3.4 times the dofs,
+#: 11 times the scatter map and the element matrices, more fill
+ORDER_MEMORY = {1: 1.0, 2: 12.0}
+
+
+#: the environment variables that set the thread counts of numba, OpenMP, MKL and OpenBLAS
+THREAD_VARIABLES = ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS",
+                    "MKL_DYNAMIC", "MKL_CBWR")
+#: the status of a run stopped by a signal: its converged steps are written, and its summary
+#: says where it stopped
+INTERRUPTED = "interrupted"
 
 
 @dataclass(frozen=True)
 class RunStatus:
-    status: str            # converged | outer_not_converged | failed
+    """How a run ended: ``status`` (``converged``, ``outer_not_converged``, ``failed`` or
+    :data:`INTERRUPTED`), its ``summary.json``, why if not converged, and the signal's
+    number if interrupted."""
+
+    status: str
     summary: Path
     message: str = ""
+    signum: int = 0
 
 
 def machine_memory() -> int:
@@ -66,26 +86,28 @@ def brep_measures(solid) -> tuple[float, float]:
     return volume(solid), float(sum(areas_by_name(solid).values()))
 
 
-def estimate_memory(case: Case, level: int, measures: dict[str, tuple[float, float]]) -> tuple[int, int]:
-    """Estimated bytes and DOFs of ``case`` at ``level`` from the B-rep volume and area of
-    every body (``measures``): inside elements ~ V / h^3, cut elements ~ 2 A / h^2."""
+def estimate_memory(case: Case, level: int, measures: dict[str, tuple[float, float]], order: int = 1
+                    ) -> tuple[int, int]:
+    """Estimated bytes and DOFs of ``case`` at ``level`` with elements of ``order`` from the
+    B-rep volume and area of every body (``measures``): inside elements ~ V / h^3, cut
+    elements ~ 2 A / h^2, ``order^3`` nodes per element."""
     total, dofs = 0, 0
     for body in case.bodies:
         h = body.grid.h(level)
         v, a = measures[body.name]
         inside, cut = v / h**3, 2.0 * a / h**2
-        total += int(BYTES_PER_ELEMENT * inside + BYTES_PER_CUT_ELEMENT * cut)
-        dofs += int(3 * (inside + cut))
+        total += int(ORDER_MEMORY[order] * (BYTES_PER_ELEMENT * inside + BYTES_PER_CUT_ELEMENT * cut))
+        dofs += int(3 * order**3 * (inside + cut))
     return total, dofs
 
 
 def check_memory(case: Case, level: int, measures: dict[str, tuple[float, float]],
-                 total: int | None = None) -> None:
+                 total: int | None = None, order: int = 1) -> None:
     """Refuse a level whose estimated memory (:func:`estimate_memory`, an upper bound for
     ``facets`` and ``nurbs_fe``: planar at level 3 is estimated at 19 GiB and peaks at 6 GB)
     exceeds the machine's physical memory ``total`` (default :func:`machine_memory`). Not the
     memory free at the moment: in the pipeline other runs hold some of it while they last."""
-    need, dofs = estimate_memory(case, level, measures)
+    need, dofs = estimate_memory(case, level, measures, order)
     have = machine_memory() if total is None else total
     if need > have:
         raise InputError("--level", f"level {level} needs about {_size(need)} "
@@ -101,22 +123,43 @@ def _size(n_bytes: float) -> str:
     return f"{n_bytes / 1024.0:.1f} EiB"
 
 
-def embed_body(solid, body: Body, level: int, surface: str) -> Embedding:
+def thread_settings() -> dict:
+    """The threads the run's libraries used: numba's count and threading layer, MKL's (PARDISO,
+    None without it) and the thread variables of the environment. Results are bitwise
+    repeatable for the same settings (PARDISO in its reproducible mode, numba's parallel
+    kernels writing disjoint outputs); other thread counts give the same path (Newton
+    iterations, active points) to round-off."""
+    try:
+        layer = numba.threading_layer()
+    except ValueError:          # no parallel kernel has run in this process
+        layer = None
+    return {"numba": numba.get_num_threads(), "numba_layer": layer, "mkl": mkl_threads(),
+            "environment": {k: os.environ[k] for k in THREAD_VARIABLES if k in os.environ}}
+
+
+def embed_body(solid, body: Body, level: int, surface: str, order: int = 1) -> Embedding:
     """``body`` embedded in its grid of ``level`` for the surface definition ``surface``
     (``facets``, ``nurbs_fe`` or ``nurbs_fit``): the boundary quadrature of
-    ``SURFACES[surface]``, the definition's name kept as ``Embedding.definition``."""
-    return embed(solid, grid_for(solid, body.grid.h0, level, body.grid.offset), SURFACES[surface],
-                 definition=surface)
+    ``SURFACES[surface]``, the definition's name kept as ``Embedding.definition``, and rules
+    exact to the degree the element of ``order`` needs (:attr:`~cgfem.fem.element.Hexahedron.degree`)."""
+    grid = grid_for(solid, body.grid.h0, level, body.grid.offset)
+    degree = hexahedron(order).degree
+    if degree == 2:
+        return embed(solid, grid, SURFACES[surface], definition=surface)
+    return embed(solid, grid, SURFACES[surface], definition=surface, degree=degree)
 
 
-def build_models(case: Case, level: int, surface: str, log: Callable[[str], None]) -> tuple[list, dict]:
+def build_models(case: Case, level: int, surface: str, log: Callable[[str], None], order: int = 1
+                 ) -> tuple[list, dict]:
     """Embed and discretize every body; returns the models and per-body measures."""
-    models, measures, _ = build_bodies(case, level, surface, log)
+    models, measures, _ = build_bodies(case, level, surface, log, order)
     return models, measures
 
 
-def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None]) -> tuple[list, dict, dict]:
-    """Embed and discretize every body: the models, per-body measures and the solids."""
+def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None], order: int = 1
+                 ) -> tuple[list, dict, dict]:
+    """Embed and discretize every body with the element of ``order``: the models, per-body
+    measures and the solids."""
     if case.contact and surface not in CONTACT_DEFINITIONS:
         raise InputError("--surface", f"contact with {surface!r} is not implemented yet "
                          f"(available: {', '.join(CONTACT_DEFINITIONS)})")
@@ -126,13 +169,14 @@ def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None
                                                    "(--surface nurbs_fe or nurbs_fit), not facets")
     solids = {b.name: build_solid(b.geometry) for b in case.bodies}
     brep = {name: brep_measures(solid) for name, solid in solids.items()}
-    check_memory(case, level, brep)
+    check_memory(case, level, brep, order=order)
     finite = case.kinematics == "finite"
     models, measures = [], {}
     for body in case.bodies:
         tic = time.perf_counter()
-        emb = embed_body(solids[body.name], body, level, surface)
-        model = BodyModel.build(body, emb, boundary_of(case, body.name), case.solver, finite)
+        emb = embed_body(solids[body.name], body, level, surface, order)
+        model = BodyModel.build(body, emb, boundary_of(case, body.name), case.solver, finite,
+                                hexahedron(order))
         models.append(model)
         measures[body.name] = {
             "nodes": model.space.n_nodes, "dofs": model.n_dofs,
@@ -225,7 +269,8 @@ def step_outputs(model: BodyModel, u: np.ndarray, recovered: np.ndarray,
     status = np.where(space.cut, 2, 1)
     surface = {"points": boundary.points.x, "displacement": boundary.values(space, u),
                "stress": stress_boundary, "von_mises": vm_boundary, "patch": boundary.patch}
-    return {"points": space.coordinates, "cells": space.connectivity, "displacement": u.reshape(-1, 3),
+    return {"points": space.coordinates, "cells": space.connectivity, "cell_type": space.element.cell_type,
+            "displacement": u.reshape(-1, 3),
             "stress": nodal_cauchy, "von_mises_nodal": vm_nodes, "status": status,
             "von_mises_max_qp": per_element, "max_von_mises": float(per_element.max(initial=0.0)),
             "von_mises_max_nodal": float(vm_nodes.max(initial=0.0)), "surface": surface,
@@ -258,14 +303,23 @@ def _remove_created(created: list[Path]) -> None:
 
 
 def run_case(case: Case, level: int, surface: str, out: Path,
-             log: Callable[[str], None] = lambda m: None) -> RunStatus:
-    """Solve ``case`` and write its results to ``out``; returns the run status
-    (``converged``, ``outer_not_converged`` or ``failed``, see :mod:`cgfem.solve.static`).
-    Bad input raises :class:`InputError` and leaves no folder this call created."""
+             log: Callable[[str], None] = lambda m: None, order: int = 1) -> RunStatus:
+    """Solve ``case`` with the hexahedra of ``order`` (1 or 2) and write its results to ``out``.
+
+    Returns the run status (``converged``, ``outer_not_converged`` or ``failed``, see
+    :mod:`cgfem.solve.static`; :data:`INTERRUPTED` when ``log`` raised
+    :class:`~cgfem.errors.RunInterrupted` once the output folder was made: the converged
+    steps' files and a summary with that status are written). Bad input raises
+    :class:`InputError` and leaves no folder this call created.
+    """
     if level < 0:
         raise InputError("--level", f"must be >= 0, got {level}")
     if surface not in SURFACES:
         raise InputError("--surface", f"must be one of {', '.join(SURFACES)}, got {surface!r}")
+    if order not in ORDERS:
+        raise InputError("--order", f"must be one of {', '.join(map(str, ORDERS))}, got {order!r}")
+    if case.contact and order != 1:
+        raise InputError("--order", f"contact with order {order} is not implemented yet (order 1 only)")
     if case.solver.linear != "auto" and case.solver.linear not in available_backends():
         raise InputError("solver.linear", f"backend {case.solver.linear!r} is not available here "
                          f"(available: {', '.join(available_backends())})")
@@ -273,30 +327,46 @@ def run_case(case: Case, level: int, surface: str, out: Path,
     created = check_out(out)
     started = time.perf_counter()
     try:
-        models, measures, solids = build_bodies(case, level, surface, log)
+        models, measures, solids = build_bodies(case, level, surface, log, order)
         try:
             out.mkdir(parents=True, exist_ok=True)
         except OSError as err:
             raise InputError("--out", f"cannot create {out}: {err.strerror or err}") from None
-        clear_previous(out)
-        built = time.perf_counter()
-        steps: list[dict] = []
-        system = System(models, build_pairs(case, models, solids, surface, log))
-        views = [BoundaryView.of(m, solids[m.name]) for m in models]
-        result = solve_static(system, case.steps, case.solver, log,
-                              lambda record: steps.append(_write_step(out, system, record, len(steps) + 1,
-                                                                      views, log)))
     except InputError:
         _remove_created(created)
         raise
-    summary = {"case": case.name, "level": level, "surface": surface, "status": result.status,
-               "message": result.message, "kinematics": case.kinematics, "bodies": measures,
-               "steps": steps,
-               "timings": {"build_s": built - started, "solve_s": time.perf_counter() - built},
-               "versions": {"cgfem": __version__, "python": platform.python_version(),
-                            "numpy": np.__version__}}
-    path = write_json_atomic(out / "summary.json", summary)
-    return RunStatus(result.status, path, result.message)
+    clear_previous(out)
+    built = time.perf_counter()
+    steps: list[dict] = []
+
+    def summary(status: str, message: str) -> Path:
+        return write_json_atomic(out / "summary.json", {
+            "case": case.name, "level": level, "surface": surface, "order": order, "status": status,
+            "message": message, "kinematics": case.kinematics, "bodies": measures, "steps": steps,
+            "timings": {"build_s": built - started, "solve_s": time.perf_counter() - built},
+            "threads": thread_settings(),
+            "versions": {"cgfem": __version__, "python": platform.python_version(), "numpy": np.__version__}})
+
+    try:
+        system = System(models, build_pairs(case, models, solids, surface, log))
+        views = [BoundaryView.of(m, solids[m.name]) for m in models]
+
+        def on_step(record: StepRecord) -> None:
+            steps.append(_write_step(out, system, record, len(steps) + 1, views))
+            outer = "" if record.outer_converged else ", outer loop NOT converged"
+            log(f"step {len(steps)} converged at load factor {record.load_factor:.4g} "
+                f"({record.outer_passes} outer passes{outer}, {record.seconds:.2f} s)")
+
+        result = solve_static(system, case.steps, case.solver, log, on_step)
+    except InputError:
+        _remove_created(created)
+        raise
+    except RunInterrupted as stop:
+        name = signal.Signals(stop.signum).name
+        message = (f"interrupted by {name} after {len(steps)} converged step(s)"
+                   + (f", at load factor {steps[-1]['load_factor']:.6g}" if steps else ""))
+        return RunStatus(INTERRUPTED, summary(INTERRUPTED, message), message, stop.signum)
+    return RunStatus(result.status, summary(result.status, result.message), result.message)
 
 
 def _write_fits(out: Path, system: System, record: StepRecord, number: int) -> dict:
@@ -330,8 +400,8 @@ def _floating_summary(system: System, record: StepRecord, unknowns: np.ndarray) 
                                     "residual": float(np.linalg.norm(r[i]))} for i in system.floating}
 
 
-def _write_step(out: Path, system: System, record: StepRecord, number: int, views: list[BoundaryView],
-                log: Callable[[str], None]) -> dict:
+def _write_step(out: Path, system: System, record: StepRecord, number: int,
+                views: list[BoundaryView]) -> dict:
     """Write the files of step ``number`` and return its entry of ``summary.json``."""
     models = system.bodies
     contact = {"force": [0.0, 0.0, 0.0], "active_points": 0, "max_pressure": 0.0, "pairs": {}}
@@ -367,7 +437,4 @@ def _write_step(out: Path, system: System, record: StepRecord, number: int, view
              "error_estimate": {n: o["error_estimate"] for n, o in zip(names, outputs)},
              "energy_norm": {n: o["energy_norm"] for n, o in zip(names, outputs)},
              "seconds": record.seconds}
-    outer = "" if record.outer_converged else ", outer loop NOT converged"
-    log(f"step {number} converged at load factor {record.load_factor:.4g} "
-        f"({record.outer_passes} outer passes{outer}, {record.seconds:.2f} s)")
     return entry

@@ -1,28 +1,30 @@
 """Compile (and cache) the numba kernels before a batch of runs: ``cgfem warmup``.
 
 Every kernel is compiled with ``cache=True``, so a process that finds the cache loads it in
-well under a second; a process that does not compiles every kernel it calls, 2-4 min in all.
+well under a second; a process that does not compiles every kernel it calls, minutes in all.
 Jobs started together on a fresh install (many jobs of a cluster) each compile the kernels
-they call at the same time. Running :func:`warm_up` once first (204 s from a cold cache, one
-thread) leaves the cache complete for all of them. The pipeline does not: on two cores it did
-not make the smoke run faster (clean clones, cold cache: 5 min 4 s with it, 3 min 36 s and
-4 min 48 s without).
+they call at the same time. Running :func:`warm_up` once first leaves the cache complete for
+all of them. The pipeline does not use it: on two cores a warm-up did not make the smoke run
+faster than its first jobs compiling side by side (docs/performance.md, "Full pipeline
+runs").
 
 It solves two small contact problems, on the coarsest grids, with each surface definition:
-two half-torus links pulled apart by 0.1 mm (Neo-Hookean, finite strain; rational NURBS
-patches, trimmed caps) and two boxes pressed together (linear elastic, small strain; planar
-patches, a body held by contact alone along z). Together they call every kernel the examples
-call: embedding, assembly in both kinematics, SPR recovery, contact search, residual and
-tangent with each surface definition, the fit of ``nurbs_fit`` and the boundary tessellation.
+two half-torus links pulled apart by 0.5 mm (Neo-Hookean, finite strain; rational NURBS
+patches, trimmed caps; the facets' chord gap at this grid is wider than 0.1 mm) and two
+boxes pressed together (linear elastic, small strain; planar patches, a body held by
+contact alone along z). Together they call every kernel the examples call: embedding,
+assembly in both kinematics, SPR recovery, contact search, residual and tangent with each
+surface definition, the fit of ``nurbs_fit`` and the boundary tessellation.
 Each run must converge; the results are thrown away.
 """
 
 from __future__ import annotations
 
+import json
 import tempfile
 import time
 from pathlib import Path
-from typing import Callable
+from typing import Callable, NamedTuple
 
 from cgfem.case.load import parse_case
 from cgfem.case.model import SURFACES
@@ -37,7 +39,7 @@ _STEEL = {"model": "neo_hookean", "E": 116.0e9, "nu": 0.3}
 
 
 def _links() -> dict:
-    """chain2's links at its coarsest grid, one step of 0.1 mm."""
+    """chain2's links at its coarsest grid, one step of 0.5 mm."""
     return {
         "name": "warmup_links", "kinematics": "finite", "steps": 1,
         "bodies": {
@@ -49,7 +51,7 @@ def _links() -> dict:
             {"body": "link_a", "patches": ["cap_a", "cap_b"], "type": "displacement",
              "components": {"x": 0.0, "y": 0.0, "z": 0.0}},
             {"body": "link_b", "patches": ["cap_a", "cap_b"], "type": "displacement",
-             "components": {"x": 0.0, "y": 0.0001, "z": 0.0}}],
+             "components": {"x": 0.0, "y": 0.0005, "z": 0.0}}],
         "contact": [{"slave": "link_b", "master": "link_a", "kappa": 10.0,
                      "slave_patches": ["tube"], "master_patches": ["tube"]}]}
 
@@ -76,10 +78,32 @@ def _blocks() -> dict:
                      "slave_patches": ["zmax"], "master_patches": ["zmin"]}]}
 
 
-def warm_up(log: Callable[[str], None] | None = None) -> list[tuple[str, str, str, float]]:
-    """Solve the two problems with every surface definition in a temporary folder; returns
-    ``(problem, surface, status, seconds)`` per run. Raises ``RuntimeError`` if one does not
-    converge (a broken install: the kernels were compiled, the solver is not right)."""
+class WarmupRun(NamedTuple):
+    """One warm-up run: the problem's name, the surface definition, the run's status, its
+    wall time (s) and the contact force (3,) of the masters on the slaves at its last step
+    (N)."""
+
+    problem: str
+    surface: str
+    status: str
+    seconds: float
+    contact_force: tuple[float, float, float]
+
+
+def warm_up(log: Callable[[str], None] | None = None) -> list[WarmupRun]:
+    """Solve the two problems with every surface definition in a temporary folder.
+
+    Returns
+    -------
+    list of WarmupRun
+        One per run, links first, definitions in :data:`SURFACE_DEFINITIONS` order.
+
+    Raises
+    ------
+    RuntimeError
+        If a run does not converge (a broken install: the kernels were compiled, the
+        solver is not right).
+    """
     log = log or (lambda message: None)
     done = []
     with tempfile.TemporaryDirectory(prefix="cgfem-warmup-") as tmp:
@@ -90,7 +114,9 @@ def warm_up(log: Callable[[str], None] | None = None) -> list[tuple[str, str, st
                 status = run_case(case, 0, surface, Path(tmp) / f"{case.name}_{surface}")
                 seconds = time.perf_counter() - tic
                 log(f"{case.name} with {surface}: {status.status} ({seconds:.1f} s)")
-                done.append((case.name, surface, status.status, seconds))
+                steps = json.loads(status.summary.read_text())["steps"]
+                force = tuple(steps[-1]["contact"]["force"]) if steps else (0.0, 0.0, 0.0)
+                done.append(WarmupRun(case.name, surface, status.status, seconds, force))
                 if status.status != CONVERGED:
                     raise RuntimeError(f"warm-up run {case.name} with {surface} ended {status.status}: "
                                        f"{status.message}")

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from pathlib import Path
 
 import pytest
 
@@ -19,8 +18,8 @@ from cgfem.case.expressions import as_expression  # noqa: E402
 from cgfem.reference.tori import PENALTY_FACTOR  # noqa: E402
 from cgfem.reference.tori_geometry import MeshSpec, mesh_level  # noqa: E402
 from cgfem.reference.tori_solve import ToriProblem, solve  # noqa: E402
+from tests.support.paths import CASES  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[2]
 PULLED, CLAMPED = "link_b/cap_a+cap_b", "link_a/cap_a+cap_b"
 
 
@@ -29,7 +28,7 @@ def test_chain3_on_the_coarsest_mesh_is_in_equilibrium():
     """chain3 (the middle link held by contact alone) on reference mesh 0: every link's
     support forces balance the contact forces on it to 1e-8 of the load, the chain is in
     tension, and the spring that held the middle link while contact closed is gone."""
-    case = load_case(REPO / "config" / "cases" / "chain3.yaml")
+    case = load_case(CASES / "chain3.yaml")
     # a tenth of the references' penalty: the balance is a property of any penalty, and
     # the softer one keeps the round-off of the residual (about 2e-9 here) further below 1e-8
     solution = solve(case, mesh_level(0), PENALTY_FACTOR / 10)
@@ -51,7 +50,7 @@ def test_chain3_on_the_coarsest_mesh_is_in_equilibrium():
 
 def _hertz_case(displacement: float):
     """chain2_steel in small strain, linear elastic steel, one step of ``displacement``."""
-    case = load_case(REPO / "config" / "cases" / "chain2_steel.yaml")
+    case = load_case(CASES / "chain2_steel.yaml")
     bodies = tuple(replace(b, material=Material("linear_elastic", b.material.E, b.material.nu))
                    for b in case.bodies)
     boundary = tuple(replace(bc, components=tuple((c, as_expression(displacement if c == 1 and bc.body == "link_b"
@@ -73,8 +72,8 @@ def test_crossed_tori_under_a_small_load_follow_hertz():
     case = _hertz_case(4.0e-5)
     R, r = 0.02, 0.005
     E, nu = case.bodies[0].material.E, case.bodies[0].material.nu
-    # a (about 0.47 mm) spans three contact elements; the penalty ten times the pipeline's
-    problem = ToriProblem(case, MeshSpec(h=0.004, h_contact=1.5e-4, r_contact=8e-4), 1e4)
+    # a (about 0.47 mm) spans three contact elements; the pipeline's penalty factor
+    problem = ToriProblem(case, MeshSpec(h=0.004, h_contact=1.5e-4, r_contact=8e-4), PENALTY_FACTOR)
     solution = problem.run()
     assert solution.converged, solution.message
     force = -problem.contact_work("link_b/link_a", ng.CF((0.0, 1.0, 0.0)))

@@ -8,9 +8,10 @@ admissible hit (converged, ``|g| <= max_gap``, master normal against ``n1``) is 
 
 Flat data (all contiguous):
 
-- ``layout`` (n_patches, 6) int64 rows ``(p, q, n_u, n_v, knot offset, control offset)``:
-  patch ``k``'s ``knots_u`` are ``knots[o : o + n_u + p + 1]``, its ``knots_v`` follow them,
-  and its homogeneous control net (n_u, n_v, 4) is ``control[c : c + 4 n_u n_v]``;
+- ``layout`` (n_patches, 8) int64 rows ``(p, q, n_u, n_v, knot offset, control offset,
+  closed along u, closed along v)``: patch ``k``'s ``knots_u`` are
+  ``knots[o : o + n_u + p + 1]``, its ``knots_v`` follow them, and its homogeneous control
+  net (n_u, n_v, 4) is ``control[c : c + 4 n_u n_v]``;
 - the grid of the master space: ``origin`` (3,), ``h``, ``shape`` (3,) elements per axis,
   ``elements`` ascending grid ids of the active elements, ``connectivity`` (n_el, 8) and the
   nodal displacements ``u`` (n_nodes, 3);
@@ -18,7 +19,7 @@ Flat data (all contiguous):
   to the first ``start_piece < 0``.
 
 NURBS evaluation is :func:`cgfem.geometry._nurbs_kernels.surface_derivs`, the grid element
-:func:`cgfem.fem._element_kernels.locate`, the H8 basis :func:`~cgfem.fem._element_kernels.basis`.
+:func:`cgfem.fem._element_kernels.locate`, the element's basis :func:`~cgfem.fem._element_kernels.basis`.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from cgfem.fem._element_kernels import basis, locate
+from cgfem.fem._element_kernels import basis, element_table, locate
 from cgfem.geometry._nurbs_kernels import surface_derivs
 
 #: ``trace`` status of a point: a Newton iterate's ``Q`` lay in no active element
@@ -101,14 +102,16 @@ def master_point_in(k, uu, vv, layout, knots, control, origin, h, shape, element
     e = slot[0]
     if e < 0:
         return e
-    N = np.empty(8)
-    dN = np.empty((8, 3))
-    basis(xi[0], h, N, dN)
+    ijk, order = element_table(connectivity.shape[1])
+    m = ijk.shape[0]
+    N = np.empty(m)
+    dN = np.empty((m, 3))
+    basis(ijk, order, xi[0], h, N, dN)
     for c in range(3):
         x[c] = SKL[0, 0, c]
         t[0, c] = SKL[1, 0, c]
         t[1, c] = SKL[0, 1, c]
-    for a in range(8):
+    for a in range(m):
         node = connectivity[e, a]
         psi0 = dN[a, 0] * SKL[1, 0, 0] + dN[a, 1] * SKL[1, 0, 1] + dN[a, 2] * SKL[1, 0, 2]
         psi1 = dN[a, 0] * SKL[0, 1, 0] + dN[a, 1] * SKL[0, 1, 1] + dN[a, 2] * SKL[0, 1, 2]
@@ -216,7 +219,7 @@ def ray_newton(x1, n1, k, u0, v0, g0, max_gap, ray_tol, max_iter, layout, knots,
     a step leaving the patch's domain wraps around along a closed direction (``layout[k, 6:8]``)
     and is clipped onto the domain along an open one, and a clipped step that does not
     move is a stuck one. Stops converged (``|F| <= ray_tol h``), on a singular ``J``, a
-    stuck step, ``|g| > 4 max_gap`` or after ``max_iter`` iterations. ``out`` (3,) receives
+    stuck step, ``|g| > 4 max_gap`` or after ``max_iter`` iterations. ``out`` (4,) receives
     ``(xi, eta, g, slot)`` (the master element of the hit: ``prefer``, the element of the
     previous pairing, while ``Q`` lies within ``band`` of it, else the element holding
     ``Q``). Returns 1 converged with ``m2 . n1 < 0`` (``m2 = t_xi x t_eta``, the

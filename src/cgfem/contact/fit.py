@@ -19,9 +19,8 @@ control point ``P[k]``. The FE side acts per component: ``V[:, c] = M^{-1} G u[:
 
 ``M`` is banded (bandwidth ``p n_v + q`` in this numbering, or ``q n_u + p`` in the
 transposed one, whichever is smaller) and factorized once by a banded Cholesky
-(:class:`BandedCholesky`), which also proves it positive definite. On chain2_steel's torus
-tube at level 3 (about 7 000 control points, bandwidth about 110) the factorization takes
-milliseconds and a few MB.
+(:class:`BandedCholesky`), which also proves it positive definite. The fitting space, the
+ties and why the fit stays a constraint in the solver: docs/methods/contact.md.
 """
 
 from __future__ import annotations
@@ -326,8 +325,8 @@ class PatchFit:
     uv, x, w : (n_q, 2), (n_q, 3), (n_q,) the rule points' parameters, positions and weights
 
     The point matrices R (n_q, n_ctrl) and N (n_q, n_nodes) are rebuilt on demand
-    (:meth:`rule_matrices`), not kept: at chain2_steel level 3 they would hold about 100 MB
-    per patch (482 000 rule points).
+    (:meth:`rule_matrices`), not kept: they take a few hundred bytes per rule point
+    (docs/methods/contact.md).
     """
 
     name: str
@@ -431,7 +430,7 @@ def build_fit(surface: NurbsSurface, uv: np.ndarray, w: np.ndarray, space: Space
     the ``auto`` refinement, :func:`fit_space`). ``name``/``patch`` label the patch in errors.
     ``smooth``: tie the controls at double knots so the fitted displacement is C1 there
     (:func:`c1_extraction`); without it the fitted surface has kinks along the joints of the
-    rational circles (a normal jump of 1e-2 rad measured on chain2's tube under a wavy field).
+    rational circles.
 
     Raises ValueError if M is singular: a control function without rule points in its
     support, or rule points too few to tell the functions apart.

@@ -1,4 +1,4 @@
-"""``contact_NNN.vtu``: one vertex per slave point of every pair (DESIGN.md contract).
+"""``contact_NNN.vtu``: one vertex per slave point of every pair (README "Result files").
 
 Point data: ``gap`` (m, signed, NaN where the ray found no master), ``pressure`` (lambda_N,
 Pa, negative in compression, 0 where inactive), ``p_N`` (the frozen stabilizing stress),
@@ -6,8 +6,9 @@ Pa, negative in compression, 0 where inactive), ``p_N`` (the frozen stabilizing 
 current area in finite strain, so ``sum pressure * weight * normal`` is the contact force on
 the slave when the surfaces are parallel), ``force`` (the exact point force on the slave, N,
 summing to the pair's contact force), ``displacement`` (m, from the point's reference
-position: ParaView's Warp By Vector with factor -1 shows the reference configuration) and ``pair`` (index of the pair in the case's ``contact`` list). Points sit at
-their current positions.
+position: ParaView's Warp By Vector with factor -1 shows the reference configuration) and
+``pair`` (index of the pair in the case's ``contact`` list). Points sit at their current
+positions.
 """
 
 from __future__ import annotations

@@ -23,7 +23,8 @@ the start of each pass of the outer loop, which refreshes both.
 
 The active set is re-evaluated at every residual evaluation (a semismooth Newton method);
 a point counts as active up to ``p_N + eps g <= eps CLOSED_GAP_H h``, so surfaces that touch
-initially (a gap of round-off size) start in contact.
+initially (a gap of round-off size) start in contact. A point within round-off of that
+threshold (:data:`TIE`) keeps its last status: the decision does not hinge on round-off.
 Chattering protection: once a point has switched :data:`MAX_SWITCHES` times within one
 Newton solve (one pass of the outer loop), its status is held as it is for the rest of that
 solve, in the residual and the tangent alike (an active point keeps ``lambda_N = p_N + eps g``
@@ -72,6 +73,11 @@ SKIN = 0.25
 #: a gap below this fraction of h counts as closed when the active set is decided (initially
 #: touching surfaces, round-off of the facet intersections); lambda_N itself is unchanged
 CLOSED_GAP_H = 1e-9
+#: the tie band of the active set: a point whose trial ``p_N + eps g`` lies within
+#: ``TIE (|p_N| + eps h)`` of the threshold (a gap of 1e-12 h, a hundred times the
+#: round-off of the examples' gaps) keeps the status it had at the last linearization point,
+#: so that two runs differing by round-off decide it alike
+TIE = 1e-12
 
 
 @dataclass
@@ -316,9 +322,13 @@ class ContactPair:
     def _multiplier(self, hits: RayHits) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``lambda_N`` (n,), the status used (n,) (held points as held) and the points' own
         rule (n,)."""
-        st = self.state
+        st, h = self.state, self.slave_space.h
         trial = np.where(hits.found, st.p_N + self.eps * np.where(hits.found, hits.g, 0.0), np.inf)
-        natural = hits.found & (trial <= self.eps * CLOSED_GAP_H * self.slave_space.h)
+        threshold = self.eps * CLOSED_GAP_H * h
+        natural = hits.found & (trial <= threshold)
+        if st.active is not None:       # a tie keeps the last status (:data:`TIE`)
+            tie = hits.found & (np.abs(trial - threshold) <= TIE * (np.abs(st.p_N) + self.eps * h))
+            natural = np.where(tie, st.active, natural)
         active = natural if st.held is None else np.where(st.held, st.held_active & hits.found, natural)
         return np.where(active, trial, 0.0), active, natural
 

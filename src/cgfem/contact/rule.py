@@ -16,7 +16,7 @@ integrated (case option ``contact[].rule``).
   variable (:func:`cgfem.embedding.reduce.reduced_surface`). On such a part both
   bodies' shape functions are trilinear, so their products are integrated exactly and the
   homogeneous state of the contact patch test is the discrete solution on any two grids
-  (tests/test_contact_patch.py). The master's element faces are taken in the reference
+  (tests/physics/test_contact_patch.py). The master's element faces are taken in the reference
   configuration, where the two surfaces meet: once the master slides along the slave, its
   faces move off the split and a quadrature error returns, growing with the slip.
 """

@@ -20,8 +20,10 @@ triangle centroids), so one search costs O(n log n); each candidate is then solv
 first while the ray meets its plane within ``STICKY`` of its edges; for NURBS+FE a Newton solve on
 ``(xi, eta, g)`` per start in the numba kernel :mod:`cgfem.contact._ray_kernels`, the previous
 pairing first when there is one, the first admissible hit kept). Admissible: the master
-normal opposes the slave normal and ``|g| <= max_gap``. Rays whose segment cannot reach the
-master's element boxes (:meth:`NurbsFeSurface._may_hit`) are skipped.
+normal opposes the slave normal and ``|g| <= max_gap``. A search given no candidate seeds
+(``near``) first skips the rays whose segment cannot reach the master's element boxes
+(:meth:`NurbsFeSurface._may_hit`); a contact pair always gives them (its Verlet list,
+:meth:`cgfem.contact.pair.ContactPair.candidates`).
 """
 
 from __future__ import annotations
@@ -36,7 +38,8 @@ from cgfem.contact import _ray_kernels as _rk
 from cgfem.contact._facet_kernels import triangle_hits
 from cgfem.contact.kinematics import MasterPoints, SlaveFrames
 from cgfem.embedding.partition import SurfaceQuadrature
-from cgfem.fem.space import LOCATE_TOL, NODE_XI, Space, shape_functions
+from cgfem.fem.element import HEX8, Hexahedron
+from cgfem.fem.space import LOCATE_TOL, Space, shape_functions
 from cgfem.geometry.nurbs import NurbsSurface
 from cgfem.geometry.solid import Solid
 
@@ -51,21 +54,17 @@ SAMPLE_REACH = 2.5
 CANDIDATES = 4
 #: barycentric tolerance of a facet hit
 FACET_TOL = 1e-10
+#: facet hits of one ray whose gaps differ by less than this fraction of h are a tie
+#: (:meth:`FacetSurface._take`)
+TIE = 1e-12
 
 
-def shape_derivatives(xi: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """H8 shape functions (n, 8), physical gradients (n, 8, 3) (:func:`shape_functions`) and
-    physical second derivatives (n, 8, 3, 3) at local coordinates ``xi`` (n, 3) of a cube of
-    size ``h``: ``d2N_a/dX_i dX_j = (2/h)^2 s_ai s_aj (1 + s_ak xi_k) / 8`` for ``i != j``
-    (``k`` the third axis), zero on the diagonal."""
-    xi = np.ascontiguousarray(xi, dtype=float)
-    N, dN = shape_functions(xi, h)
-    f = 1.0 + xi[:, None, :] * NODE_XI[None, :, :]                 # (n, 8, 3)
-    s = NODE_XI * (2.0 / h)
-    d2N = np.zeros(f.shape + (3,))
-    for i, j, k in ((0, 1, 2), (0, 2, 1), (1, 2, 0)):
-        d2N[..., i, j] = d2N[..., j, i] = s[None, :, i] * s[None, :, j] * f[..., k] / 8.0
-    return N, dN, d2N
+def shape_derivatives(xi: np.ndarray, h: float, element: Hexahedron = HEX8
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Shape functions (n, n_nodes), physical gradients (n, n_nodes, 3) and physical second
+    derivatives (n, n_nodes, 3, 3) of ``element`` at local coordinates ``xi`` (n, 3) of a cube
+    of size ``h`` (:meth:`cgfem.fem.element.Hexahedron.tabulate`)."""
+    return element.tabulate(xi, h, second=True)
 
 
 def element_values(space: Space, u: np.ndarray, slots: np.ndarray) -> np.ndarray:
@@ -269,11 +268,11 @@ class RaySurface:
         m = int(np.ceil(2.0 * max_gap / self.spacing)) + 1
         ts = np.linspace(-max_gap, max_gap, m)
         samples = x1[:, None, :] + ts[None, :, None] * n1[:, None, :]
-        # sliding-midpoint splits: a median-split tree over points on a surface queried from
-        # off the surface is several times slower (the nearest seed is the same)
+        # sliding-midpoint splits: a median-split tree over points on a surface is slower to
+        # query from off the surface (the nearest seed is the same)
         tree = cKDTree(seeds_x, leafsize=32, balanced_tree=False, compact_nodes=False)
-        # a sample farther than SAMPLE_REACH spacings from every seed has none (10x faster
-        # than the unbounded query on chain2_steel at level 1, where most of these rays miss)
+        # a sample farther than SAMPLE_REACH spacings from every seed has none: the bounded
+        # query is much cheaper for the many rays that miss (docs/performance.md)
         _, idx = tree.query(samples.reshape(-1, 3), distance_upper_bound=SAMPLE_REACH * self.spacing,
                             workers=numba.get_num_threads())
         idx = idx.reshape(n, m)
@@ -543,9 +542,16 @@ class FacetSurface:
 
     def _take(self, best: RayHits, cand: np.ndarray, rows: np.ndarray, tris: np.ndarray, l1: np.ndarray,
               l2: np.ndarray, g: np.ndarray, nearest: bool) -> None:
-        """Write hits into ``best``: per ray the nearest (``nearest``) or its only one."""
+        """Write hits into ``best``: per ray the nearest (``nearest``) or its only one. Hits
+        within ``TIE h`` of a ray's nearest (a ray through a shared edge meets both
+        triangles at the same ``g`` up to round-off) go to the lowest triangle id, so the
+        choice does not hinge on round-off."""
         if nearest and rows.size:
-            order = np.lexsort((np.abs(g), rows))
+            size = np.abs(g)
+            nearest_g = np.full(best.found.size, np.inf)
+            np.minimum.at(nearest_g, rows, size)
+            close = np.flatnonzero(size <= nearest_g[rows] + TIE * self.h)
+            order = close[np.lexsort((cand[tris[close]], rows[close]))]
             first = order[np.concatenate([[True], rows[order][1:] != rows[order][:-1]])]
             rows, tris, l1, l2, g = rows[first], tris[first], l1[first], l2[first], g[first]
         best.found[rows] = True

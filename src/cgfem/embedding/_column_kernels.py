@@ -1,8 +1,10 @@
 """Numba kernels of the positive volume rules of cut elements (:mod:`cgfem.embedding.columns`).
 
 Per cut element: the exact column rule of its material part (positive, every point in the
-material), then Caratheodory recombination to at most ``N_MOMENTS`` points with the same
-moments. Arrays are flat; the Python layer groups the inputs.
+material), then Caratheodory recombination to at most ``(degree + 1)^3`` points with the same
+moments, the tensor Legendre polynomials of degree <= ``degree`` in each variable. The
+degree is an argument of every kernel that needs it; Gauss tables come from the caller.
+Arrays are flat; the Python layer groups the inputs.
 """
 
 from __future__ import annotations
@@ -13,11 +15,6 @@ from numba import njit, prange
 from cgfem.embedding import _cone_kernels as _cones
 from cgfem.embedding._face_kernels import face_key, line_intervals
 
-#: Legendre polynomials per direction matched by the rules (degree <= 2 in each variable)
-N_POLY = 3
-N_MOMENTS = N_POLY**3
-#: Gauss points per column and per face strip: exact for degree <= 3 along them
-N_GAUSS = 2
 #: a normal component of this size (or less) of the wrong sign still counts as a graph
 SIGN_EPS = 1e-12
 #: relative rank threshold of the elimination in the recombination
@@ -31,18 +28,23 @@ OK, NO_DIRECTION, NOT_RECOMBINED, CONES = 0, 1, 2, 3
 
 
 @njit(cache=True)
-def legendre_row(xi, out):
-    """The ``N_MOMENTS`` tensor Legendre values ``L_a(xi0) L_b(xi1) L_c(xi2)`` at local
-    coordinates ``xi`` (3,), ``a`` slowest."""
-    L = np.empty((3, N_POLY))
+def legendre_row(xi, degree, out):
+    """The ``(degree + 1)^3`` tensor Legendre values ``L_a(xi0) L_b(xi1) L_c(xi2)``,
+    ``a, b, c <= degree``, at local coordinates ``xi`` (3,) -> ``out``, ``a`` slowest.
+    ``L_2 = (3 x^2 - 1) / 2`` is written out, higher ones follow Bonnet's recurrence
+    ``(k + 1) L_{k+1} = (2 k + 1) x L_k - k L_{k-1}``."""
+    n = degree + 1
+    L = np.empty((3, max(n, 3)))
     for d in range(3):
         L[d, 0] = 1.0
         L[d, 1] = xi[d]
         L[d, 2] = 1.5 * xi[d] * xi[d] - 0.5
+        for k in range(2, degree):
+            L[d, k + 1] = ((2 * k + 1) * xi[d] * L[d, k] - k * L[d, k - 1]) / (k + 1)
     k = 0
-    for a in range(N_POLY):
-        for b in range(N_POLY):
-            for c in range(N_POLY):
+    for a in range(n):
+        for b in range(n):
+            for c in range(n):
                 out[k] = L[0, a] * L[1, b] * L[2, c]
                 k += 1
 
@@ -69,7 +71,7 @@ def _null_space_svd(phi, rows, n, tol):
 def _null_space(phi, rows, n, tol):
     """Null vectors (f, n) of the matrix whose columns are ``phi[rows[:n]]``: Gauss-Jordan
     elimination with complete pivoting (stable on the nearly dependent columns of clustered
-    points, where partial pivoting lost 1e-7 of the moments; 3-4x cheaper than an SVD),
+    points, where partial pivoting loses accuracy in the moments; cheaper than an SVD),
     stopped when the largest remaining entry is below ``tol`` times the largest entry; one
     vector per free column."""
     d = phi.shape[1]
@@ -335,8 +337,8 @@ def _column_rule(e_ijk, origin, h, shape, node_shape, element_ids, s_x, s_w, s_n
     ``tau``) to the face edge, and full strips over the material intervals of the edge on
     the ``tau`` side (a grid line). Where no in-plane axis makes ``R``'s trimming curves a
     graph, the columns come from the stack of elements instead (:func:`_stack_rule`).
-    Gauss points on columns and strips make the rule exact for polynomials of degree <= 3
-    along them.
+    Columns and strips carry the Gauss rule ``gx, gw`` on [0, 1]; ``n`` points make the rule
+    exact for polynomials of degree <= ``2 n - 1`` along them.
     """
     s0 = s_off[row]
     s1 = s_off[row + 1]
@@ -417,15 +419,20 @@ def _column_rule(e_ijk, origin, h, shape, node_shape, element_ids, s_x, s_w, s_n
 
 @njit(cache=True, parallel=True)
 def column_rules(element_ids, elements_ijk, origin, h, shape, node_shape, s_x, s_w, s_n, s_off,
-                 t_key, t_x, t_w, t_n, l_start, l_off, l_coord, gx, gw,
+                 t_key, t_x, t_w, t_n, l_start, l_off, l_coord, gx, gw, cone_tables, degree,
                  out_x, out_w, out_count, out_status, out_full, out_moments):
-    """Positive rules of at most ``N_MOMENTS`` points for every cut element (ids
-    ``element_ids``, ascending, indices ``elements_ijk``; boundary points of row ``e`` are
-    ``s_off[e]:s_off[e + 1]``): ``out_x`` (m, N_MOMENTS, 3), ``out_w``, ``out_count`` (m,),
-    ``out_status`` (m,) OK / CONES / NO_DIRECTION / NOT_RECOMBINED, ``out_full`` (m,) the size of
-    the exact column rule and ``out_moments`` (m, N_MOMENTS) its local Legendre moments."""
+    """Positive rules of at most ``M = (degree + 1)^3`` points, with the moments of the
+    tensor Legendre polynomials of degree <= ``degree`` per variable, for every cut element
+    (ids ``element_ids``, ascending, indices ``elements_ijk``; boundary points of row ``e``
+    are ``s_off[e]:s_off[e + 1]``). ``gx, gw``: Gauss rule on [0, 1] of the columns and
+    strips (exact for ``degree`` along them); ``cone_tables``: the radial and edge rules of
+    :func:`cgfem.embedding._cone_kernels.cone_rule`. Outputs: ``out_x`` (m, M, 3),
+    ``out_w`` (m, M), ``out_count`` (m,), ``out_status`` (m,) OK / CONES / NO_DIRECTION /
+    NOT_RECOMBINED, ``out_full`` (m,) the size of the exact column rule and ``out_moments``
+    (m, M) its local Legendre moments."""
     m = elements_ijk.shape[0]
     half = 0.5 * h
+    n_moments = (degree + 1) ** 3
     for e in prange(m):
         ijk = elements_ijk[e].copy()
         x, w = _column_rule(ijk, origin, h, shape, node_shape, element_ids, s_x, s_w, s_n, s_off, e,
@@ -433,7 +440,7 @@ def column_rules(element_ids, elements_ijk, origin, h, shape, node_shape, s_x, s
         kind = OK
         if w.shape[0] == 0:
             x, w = _cones.cone_rule(ijk, origin, h, shape, node_shape, s_x, s_w, s_n, s_off[e], s_off[e + 1],
-                                    t_key, t_x, t_w, t_n, l_start, l_off, l_coord)
+                                    t_key, t_x, t_w, t_n, l_start, l_off, l_coord, cone_tables)
             kind = CONES
         n = w.shape[0]
         out_full[e] = n
@@ -444,13 +451,13 @@ def column_rules(element_ids, elements_ijk, origin, h, shape, node_shape, s_x, s
         centre = np.empty(3)
         for d in range(3):
             centre[d] = origin[d] + (ijk[d] + 0.5) * h
-        phi = np.empty((n, N_MOMENTS))
+        phi = np.empty((n, n_moments))
         xi = np.empty(3)
         wl = np.empty(n)
         for i in range(n):
             for d in range(3):
                 xi[d] = (x[i, d] - centre[d]) / half
-            legendre_row(xi, phi[i])
+            legendre_row(xi, degree, phi[i])
             wl[i] = w[i] / half**3
         full = moments(phi, wl)
         out_moments[e, :] = full
@@ -470,25 +477,26 @@ def column_rules(element_ids, elements_ijk, origin, h, shape, node_shape, s_x, s
 
 
 @njit(cache=True, parallel=True)
-def recombine_groups(x, w, centre, half, offsets, out_w):
+def recombine_groups(x, w, centre, half, offsets, degree, out_w):
     """Caratheodory recombination of every group ``offsets[g]:offsets[g + 1]`` of points
-    ``x`` (n, 3) with weights ``w`` (n,) -> ``out_w`` (n,): at most ``N_MOMENTS`` positive
-    weights per group with the group's tensor Legendre moments in the local coordinates
-    ``(x - centre[g]) / half``."""
+    ``x`` (n, 3) with weights ``w`` (n,) -> ``out_w`` (n,): at most ``(degree + 1)^3``
+    positive weights per group with the group's moments of the tensor Legendre polynomials
+    of degree <= ``degree`` per variable in the local coordinates ``(x - centre[g]) / half``."""
+    n_moments = (degree + 1) ** 3
     for g in prange(offsets.shape[0] - 1):
         a = offsets[g]
         b = offsets[g + 1]
-        if b - a <= N_MOMENTS:
+        if b - a <= n_moments:
             for i in range(a, b):
                 out_w[i] = w[i]
             continue
-        phi = np.empty((b - a, N_MOMENTS))
+        phi = np.empty((b - a, n_moments))
         xi = np.empty(3)
         wl = np.empty(b - a)
         for i in range(a, b):
             for d in range(3):
                 xi[d] = (x[i, d] - centre[g, d]) / half
-            legendre_row(xi, phi[i - a])
+            legendre_row(xi, degree, phi[i - a])
             wl[i - a] = max(w[i], 0.0)
         wl, ok = recombine_checked(phi, wl, moments(phi, wl))
         for i in range(a, b):

@@ -21,11 +21,6 @@ from numba import njit
 
 from cgfem.embedding._face_kernels import face_key, line_intervals
 
-#: Gauss points of the radial rules: 5 for the 3D cones (s^2 f(s), degree 8), 4 for the 2D
-#: cones (s f(s), degree 7), 4 on edge intervals (degree 6)
-N_RADIAL_3D = 5
-N_RADIAL_2D = 4
-N_EDGE = 4
 #: a cone height below -HEIGHT_EPS * h is a negative weight (not star-shaped)
 HEIGHT_EPS = 1e-12
 
@@ -36,10 +31,19 @@ def _gauss01(n: int) -> tuple[np.ndarray, np.ndarray]:
     return 0.5 * (x + 1.0), 0.5 * w
 
 
-# Gauss tables, compiled into the kernels as constants
-_GE, _GWE = _gauss01(N_EDGE)
-_G2, _GW2 = _gauss01(N_RADIAL_2D)
-_G3, _GW3 = _gauss01(N_RADIAL_3D)
+def radial_points(degree: int) -> tuple[int, int, int]:
+    """Gauss points ``(3D radial, 2D radial, edge)`` for the moments of degree <= ``degree``
+    per variable (total degree ``3 degree``): ``s^2 f(s)`` of degree ``3 degree + 2`` along
+    the 3D cones, ``s f(s)`` of degree ``3 degree + 1`` along the 2D cones, ``3 degree`` on
+    the edge intervals; ``n`` points integrate degree ``2 n - 1``. Degree 2: (5, 4, 4)."""
+    return (3 * degree + 2) // 2 + 1, (3 * degree + 1) // 2 + 1, (3 * degree) // 2 + 1
+
+
+def cone_tables(degree: int) -> tuple[np.ndarray, ...]:
+    """The rules on [0, 1] of :func:`radial_points` as the tuple ``(g3, gw3, g2, gw2, ge,
+    gwe)`` that :func:`cone_rule` takes."""
+    n3, n2, ne = radial_points(degree)
+    return (*_gauss01(n3), *_gauss01(n2), *_gauss01(ne))
 
 
 @njit(cache=True)
@@ -101,18 +105,19 @@ def _cones(z, wz, mz, k, q, gr, gwr, power, tol):
 
 @njit(cache=True)
 def face_region(e_ijk, axis, side, lo, h, shape, node_shape, t_key, t_x, t_w, t_n,
-                l_start, l_off, l_coord):
+                l_start, l_off, l_coord, g2, gw2, ge, gwe):
     """2D rule of the material region of the face ``side`` (0: low, 1: high) normal to
-    ``axis`` of element ``e_ijk``: (points (k, 3), weights (k,), ok). ``ok`` is False when
-    the region is not star-shaped from its centroid; an empty region gives no points."""
+    ``axis`` of element ``e_ijk``: (points (k, 3), weights (k,), ok), with the radial rule
+    ``g2, gw2`` and the edge rule ``ge, gwe`` on [0, 1]. ``ok`` is False when the region is
+    not star-shaped from its centroid; an empty region gives no points."""
     b = (axis + 1) % 3
     c = (axis + 2) % 3
     key = face_key(e_ijk, axis, 1 if side == 1 else -1, shape)
     t0 = np.searchsorted(t_key, key)
     t1 = np.searchsorted(t_key, key + 1)
-    ge, gwe = _GE, _GWE
+    n_edge = ge.shape[0]
     intervals = np.empty((8, 2))
-    cap = (t1 - t0) + 4 * 8 * N_EDGE
+    cap = (t1 - t0) + 4 * 8 * n_edge
     z = np.empty((cap, 3))
     wz = np.empty(cap)
     mz = np.zeros((cap, 3))
@@ -130,7 +135,7 @@ def face_region(e_ijk, axis, side, lo, h, shape, node_shape, t_key, t_x, t_w, t_
                                     lo[line_axis], lo[line_axis] + h, intervals)
             for r in range(n_int):
                 span = intervals[r, 1] - intervals[r, 0]
-                for g in range(N_EDGE):
+                for g in range(n_edge):
                     z[k, axis] = plane
                     z[k, across] = lo[across] + end * h
                     z[k, line_axis] = intervals[r, 0] + ge[g] * span
@@ -150,16 +155,18 @@ def face_region(e_ijk, axis, side, lo, h, shape, node_shape, t_key, t_x, t_w, t_
     if area <= 0.0:
         return np.empty((0, 3)), np.empty(0), area > -1e-12 * h * h
     q[axis] = plane
-    x, w = _cones(z, wz, mz, k, q, _G2, _GW2, 1, HEIGHT_EPS * h)
+    x, w = _cones(z, wz, mz, k, q, g2, gw2, 1, HEIGHT_EPS * h)
     return x, w, w.shape[0] > 0
 
 
 @njit(cache=True)
 def cone_rule(e_ijk, origin, h, shape, node_shape, s_x, s_w, s_n, s0, s1,
-              t_key, t_x, t_w, t_n, l_start, l_off, l_coord):
+              t_key, t_x, t_w, t_n, l_start, l_off, l_coord, tables):
     """The sub-tetrahedra rule of one cut element (module docstring): points (N, 3) and
     positive weights (N,), or empty arrays when the element is not star-shaped from its
-    centroid."""
+    centroid. ``tables``: the Gauss rules on [0, 1] ``(g3, gw3, g2, gw2, ge, gwe)`` of the 3D
+    cones, the 2D cones and the edge intervals (:func:`cone_tables`)."""
+    g3, gw3, g2, gw2, ge, gwe = tables
     lo = np.empty(3)
     for d in range(3):
         lo[d] = origin[d] + e_ijk[d] * h
@@ -170,7 +177,7 @@ def cone_rule(e_ijk, origin, h, shape, node_shape, s_x, s_w, s_n, s0, s1,
     for axis in range(3):
         for side in range(2):
             fx, fw, ok = face_region(e_ijk, axis, side, lo, h, shape, node_shape, t_key, t_x, t_w,
-                                     t_n, l_start, l_off, l_coord)
+                                     t_n, l_start, l_off, l_coord, g2, gw2, ge, gwe)
             if not ok:
                 return np.empty((0, 3)), np.empty(0)
             faces_x.append(fx)
@@ -201,4 +208,4 @@ def cone_rule(e_ijk, origin, h, shape, node_shape, s_x, s_w, s_n, s0, s1,
     volume, p = _centroid(y, wy, ny, k, o, 3.0)
     if volume <= 0.0:
         return np.empty((0, 3)), np.empty(0)
-    return _cones(y, wy, ny, k, p, _G3, _GW3, 2, HEIGHT_EPS * h)
+    return _cones(y, wy, ny, k, p, g3, gw3, 2, HEIGHT_EPS * h)

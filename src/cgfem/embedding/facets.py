@@ -68,6 +68,22 @@ OUTSIDE, INSIDE, CUT = 0, 1, 2
 #: Default polynomial degree of the triangle rule of :attr:`FacetBoundary.surface`.
 DEFAULT_DEGREE = 4
 
+
+def facet_surface_degree(degree: int) -> int:
+    """Total degree of the triangle rule kept as the facets' boundary rule when the volume
+    and reduced boundary rules are exact for ``degree`` per variable: ``3 degree``, the
+    total degree of the products of shape functions on a tilted triangle (12 for
+    triquadratic elements); degree 2 keeps :data:`DEFAULT_DEGREE` (exact for the products of
+    trilinear shape functions on triangles in a coordinate plane, total degree 4)."""
+    return DEFAULT_DEGREE if degree <= 2 else 3 * degree
+
+
+def volume_surface_degree(degree: int) -> int:
+    """Total degree of the triangle rule the volume rules of degree ``degree`` per variable
+    need: the column (and moment-fitting) integrand, an antiderivative of degree
+    ``degree + 1`` along one axis times degree ``degree`` along the other two."""
+    return 3 * degree + 1
+
 # ------------------------------------------------------------------------------------------
 # symmetric triangle rules: barycentric orbits, weights normalised to sum 1 (polished by
 # Newton on the moment equations of all monomials up to the degree)
@@ -439,9 +455,11 @@ class FacetBoundary:
     def fitted_volume_args(self, points: int = DEFAULT_POINTS) -> dict:
         """Keyword arguments of :func:`cgfem.embedding.moments.fitted_volume_rule` (with the
         grid) for the exact ``points^3`` rules of the polyhedron's cut elements: the triangle
-        rule is exact for degree ``2 points + 1`` and the segment rule for ``2 points - 1``,
-        the degrees of the moment integrands."""
-        s = self.surface if self.degree >= 2 * points + 1 else self.surface_rule(2 * points + 1)
+        rule is exact for total degree ``3 points - 2`` and the segment rule for
+        ``2 points - 1``, the degrees of the moment integrands (an antiderivative of degree
+        ``points`` times ``points - 1`` per other variable)."""
+        need = volume_surface_degree(points - 1)
+        s = self.surface if self.degree >= need else self.surface_rule(need)
         t = self.trims if self.points >= points else self.trim_rule(points)
         t = t.select(t.axis == 0)
         return dict(elements=self.cut, surf_x=s.x, surf_w=s.w, surf_nx=s.normal[:, 0],

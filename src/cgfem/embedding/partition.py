@@ -31,6 +31,19 @@ MAX_POINTS = 12
 MAX_DEPTH = 40
 
 
+def partition_min_points(degree: int) -> int:
+    """Fewest Gauss points per direction and interval for volume rules exact for polynomials
+    of degree ``degree`` per variable (:func:`cgfem.embedding.quadrature.embed`).
+
+    The error model of :func:`cgfem.embedding._partition_kernels.gauss_order` follows the
+    Bezier piece, not the element: on a cell a fraction of the piece wide it may pick 2 to 4
+    points, while the column integrands are polynomials of degree ``3 degree + 1`` in the
+    element's local coordinates. Above degree 2 the minimum is ``(3 degree + 1) // 2 + 2``:
+    one point beyond exactness for that degree on a flat piece, for the rational map and its
+    area element (8 for degree 4). Degree 2 keeps :data:`MIN_POINTS`."""
+    return MIN_POINTS if degree <= 2 else (3 * degree + 1) // 2 + 2
+
+
 _SURFACE_FIELDS = ("patch", "uv", "x", "w", "normal", "element", "piece")
 
 

@@ -1,20 +1,26 @@
 """Embedding of one body in its Cartesian grid: element status and quadrature rules.
 
-:func:`embed` classifies every grid element as outside, inside or cut and builds
+:func:`embed` classifies every grid element as outside, inside or cut and builds, for the
+polynomial ``degree`` per variable its rules must integrate exactly (2 for trilinear
+elements, the default; 4 for triquadratic ones):
 
-- the volume rule: 2x2x2 Gauss points on inside elements (exact for polynomials of degree
-  <= 3 in each variable); on cut elements, positive rules of at most 27 points in the
-  material, exact for degree <= 2 in each variable (:mod:`cgfem.embedding.columns`), or,
-  where the boundary piece is not a graph along any axis, the moment-fitted 3x3x3 rule
-  (:mod:`cgfem.embedding.moments`, exact too, but with points possibly outside the
-  material and signed weights);
+- the volume rule: ``n^3`` Gauss points on inside elements, ``n = degree // 2 + 1`` (2x2x2
+  for degree 2, 3x3x3 for degree 4; exact for degree ``2 n - 1`` in each variable); on cut
+  elements, positive rules of at most ``(degree + 1)^3`` points in the material, exact for
+  degree <= ``degree`` in each variable (:mod:`cgfem.embedding.columns`), or, where neither
+  the columns nor the sub-tetrahedra give a positive rule, the moment-fitted
+  ``(degree + 1)^3`` rule (:mod:`cgfem.embedding.moments`, exact too, but with points
+  possibly outside the material and signed weights);
 - the surface rule on the exact NURBS boundary, per patch, with ``(xi, eta)``, outward
   normals and owning elements (:mod:`cgfem.embedding.partition`), and its reduction to at
-  most 27 points per element and patch for the weak form (:mod:`cgfem.embedding.reduce`).
+  most ``(degree + 1)^3`` points per element and patch for the weak form
+  (:mod:`cgfem.embedding.reduce`).
 
 An element is cut when a piece of the boundary of positive area lies in it, whatever the
 signs of its nodes (a surface that enters and leaves through one face, a tube thinner than
-the element); otherwise it is inside or outside as its nodes are.
+the element); otherwise it is inside or outside as its centre is (for ``facets``: cut,
+inside or outside by its node signs). Why each rule is as it is:
+docs/methods/geometry-and-embedding.md.
 """
 
 from __future__ import annotations
@@ -25,12 +31,12 @@ from functools import cached_property
 import numpy as np
 
 from cgfem.case.model import SURFACES
-from cgfem.embedding.facets import FacetSurface, facet_embedding_parts
+from cgfem.embedding.facets import FacetSurface, facet_embedding_parts, facet_surface_degree, volume_surface_degree
 from cgfem.embedding.grid import CartesianGrid
-from cgfem.embedding.columns import ColumnRules, LineHits, column_rules
+from cgfem.embedding.columns import DEFAULT_DEGREE, ColumnRules, LineHits, check_degree, column_rules, n_gauss
 from cgfem.embedding.lines import cast_lines, cast_z_lines
-from cgfem.embedding.moments import DEFAULT_POINTS, VolumeRule, fitted_volume_rule
-from cgfem.embedding.partition import DEFAULT_TOL, SurfaceQuadrature, partition_surface
+from cgfem.embedding.moments import VolumeRule, fitted_volume_rule
+from cgfem.embedding.partition import DEFAULT_TOL, SurfaceQuadrature, partition_min_points, partition_surface
 from cgfem.embedding.reduce import reduced_surface
 from cgfem.geometry.bvh import SurfaceIndex
 from cgfem.geometry.inside import points_inside
@@ -55,6 +61,8 @@ class Embedding:
         None for the NURBS boundary
     definition : the surface definition the embedding was built for: ``facets``,
         ``nurbs_fe`` or ``nurbs_fit`` (the last two share the NURBS quadrature)
+    degree : the polynomial degree per variable the volume rule and :attr:`boundary`
+        integrate exactly (2: trilinear elements; 4: triquadratic ones)
     """
 
     grid: CartesianGrid
@@ -65,13 +73,15 @@ class Embedding:
     fallback: np.ndarray
     facets: FacetSurface | None
     definition: str
+    degree: int = DEFAULT_DEGREE
 
     @cached_property
     def boundary(self) -> SurfaceQuadrature:
-        """The reduced boundary rule for the weak form's boundary terms: at most 27 points
-        of ``surface`` per element and patch (:mod:`cgfem.embedding.reduce`), built on
-        first use."""
-        return reduced_surface(self.grid, self.surface)
+        """The reduced boundary rule for the weak form's boundary terms: at most
+        ``(degree + 1)^3`` points of ``surface`` per element and patch with its moments of
+        the polynomials of degree <= ``degree`` per variable (:mod:`cgfem.embedding.reduce`),
+        built on first use."""
+        return reduced_surface(self.grid, self.surface, degree=self.degree)
 
     @property
     def active_elements(self) -> np.ndarray:
@@ -125,9 +135,10 @@ def grid_for(solid: Solid, h0: float, level: int, offset=(0.0, 0.0, 0.0)) -> Car
     return CartesianGrid.covering(lo, hi, h0, level, offset)
 
 
-def _interior_rule(grid: CartesianGrid, elements: np.ndarray) -> VolumeRule:
-    """2x2x2 Gauss rule (exact for degree <= 3 per variable) on each of ``elements``."""
-    local, wq = tensor_gauss(2, 3)
+def _interior_rule(grid: CartesianGrid, elements: np.ndarray, degree: int = DEFAULT_DEGREE) -> VolumeRule:
+    """``n^3`` Gauss rule, ``n = degree // 2 + 1`` (exact for degree ``2 n - 1 >= degree``
+    per variable: 2x2x2 for degree 2, 3x3x3 for degree 4), on each of ``elements``."""
+    local, wq = tensor_gauss(n_gauss(degree), 3)
     centre = grid.element_center(grid.element_ijk(elements))
     x = centre[:, None, :] + 0.5 * grid.h * local[None, :, :]
     w = np.broadcast_to(wq * (0.5 * grid.h) ** 3, x.shape[:2])
@@ -135,15 +146,35 @@ def _interior_rule(grid: CartesianGrid, elements: np.ndarray) -> VolumeRule:
 
 
 def embed(solid: Solid, grid: CartesianGrid, surface: str = "nurbs", tol: float = DEFAULT_TOL,
-          points: int = DEFAULT_POINTS, index: SurfaceIndex | None = None,
-          definition: str | None = None) -> Embedding:
+          points: int | None = None, index: SurfaceIndex | None = None,
+          definition: str | None = None, degree: int = DEFAULT_DEGREE) -> Embedding:
     """Classify the elements of ``grid`` and build the quadrature of ``solid`` for the
     boundary ``surface`` (``nurbs``: exact NURBS boundary; ``facets``: the marching-cubes
-    polyhedron of :mod:`cgfem.embedding.facets`). ``definition`` names the contact surface
-    definition the embedding serves (a key of :data:`cgfem.case.model.SURFACES`, whose value
-    must be ``surface``), by default ``facets`` or ``nurbs_fe``."""
+    polyhedron of :mod:`cgfem.embedding.facets`).
+
+    Parameters
+    ----------
+    solid, grid : the body and its grid
+    surface : ``nurbs`` or ``facets``
+    tol : target relative accuracy of the NURBS partition's Gauss intervals
+    points : Gauss points per direction of the moment-fitted fallback rule; at least and by
+        default ``degree + 1`` (exact for degree < points per variable)
+    index : the solid's surface index (built if None)
+    definition : the contact surface definition the embedding serves (a key of
+        :data:`cgfem.case.model.SURFACES`, whose value must be ``surface``), by default
+        ``facets`` or ``nurbs_fe``
+    degree : polynomial degree in each variable that the volume rule and the reduced
+        boundary rule integrate exactly: 2 (trilinear elements, the default) or 4
+        (triquadratic); any integer in ``1..MAX_DEGREE`` is accepted. Cut elements get at
+        most ``(degree + 1)^3`` points, inside elements ``(degree // 2 + 1)^3``.
+    """
     if surface not in SURFACE_DEFINITIONS:
         raise ValueError(f"unknown surface definition {surface!r} (known: {', '.join(SURFACE_DEFINITIONS)})")
+    degree = check_degree(degree)
+    points = degree + 1 if points is None else int(points)
+    if points < degree + 1:
+        raise ValueError(f"the fitted rule needs at least degree + 1 = {degree + 1} points per direction "
+                         f"to be exact for degree {degree}, got {points}")
     if definition is None:
         definition = "facets" if surface == "facets" else "nurbs_fe"
     if SURFACES.get(definition) != surface:
@@ -152,16 +183,17 @@ def embed(solid: Solid, grid: CartesianGrid, surface: str = "nurbs", tol: float 
     index = SurfaceIndex.build(solid) if index is None else index
     names = tuple(p.name for p in solid.patches)
     if surface == "facets":
-        parts = facet_embedding_parts(solid, grid, index)
-        # the column integrands have degree 2 points + 1 on the triangles, like the moments'
-        exact = parts.surface if parts.degree >= 2 * points + 1 else parts.surface_rule(2 * points + 1)
-        rules = column_rules(grid, parts.cut, exact, parts.trims, parts.line_hits())
+        parts = facet_embedding_parts(solid, grid, index, facet_surface_degree(degree), points)
+        # the column integrands have total degree 3 degree + 1 on the triangles
+        need = volume_surface_degree(degree)
+        exact = parts.surface if parts.degree >= need else parts.surface_rule(need)
+        rules = column_rules(grid, parts.cut, exact, parts.trims, parts.line_hits(), degree)
         fitted = _fallback_rule(grid, rules, parts.fitted_volume_args(points) if rules.fallback.size else None,
                                 points)
         return _assemble(grid, parts.status, rules, fitted, parts.surface, names,
-                         parts.facet_surface(), definition)
+                         parts.facet_surface(), definition, degree)
     z_lines = cast_z_lines(index, grid)
-    part = partition_surface(solid, grid, tol)
+    part = partition_surface(solid, grid, tol, min_points=partition_min_points(degree))
     status = np.zeros(grid.n_elements, np.int8)
     cut = np.unique(part.surface.element[part.surface.w > 0.0])
     status[cut] = CUT
@@ -172,7 +204,7 @@ def embed(solid: Solid, grid: CartesianGrid, surface: str = "nurbs", tol: float 
     status[uncut[points_inside(index, centres)]] = INSIDE
     xy = [cast_lines(index, grid, axis).paired() for axis in (0, 1)]
     hits = LineHits((xy[0].offsets, xy[1].offsets, z_lines.offsets), (xy[0].coord, xy[1].coord, z_lines.z))
-    rules = column_rules(grid, cut, part.surface, part.trims, hits)
+    rules = column_rules(grid, cut, part.surface, part.trims, hits, degree)
     s, t = part.surface, part.trims.select(part.trims.axis == 0)
     fitted_elements = rules.fallback
     cut_ijk = grid.element_ijk(fitted_elements)
@@ -181,7 +213,7 @@ def embed(solid: Solid, grid: CartesianGrid, surface: str = "nurbs", tol: float 
     args = dict(elements=fitted_elements, surf_x=s.x, surf_w=s.w, surf_nx=s.normal[:, 0], surf_element=s.element,
                 trim_x=t.x, trim_w=t.w, trim_my=t.normal[:, 1], trim_element=t.element, edge_intervals=edges)
     fitted = fitted_volume_rule(grid, **args, n=points)
-    return _assemble(grid, status, rules, fitted, part.surface, names, None, definition)
+    return _assemble(grid, status, rules, fitted, part.surface, names, None, definition, degree)
 
 
 def _fallback_rule(grid: CartesianGrid, rules: ColumnRules, args: dict | None, points: int) -> VolumeRule:
@@ -199,8 +231,8 @@ def _fallback_rule(grid: CartesianGrid, rules: ColumnRules, args: dict | None, p
 
 def _assemble(grid: CartesianGrid, status: np.ndarray, rules: ColumnRules, fitted: VolumeRule,
               surface: SurfaceQuadrature, names: tuple[str, ...], facets: FacetSurface | None,
-              definition: str) -> Embedding:
-    inner = _interior_rule(grid, np.flatnonzero(status == INSIDE))
+              definition: str, degree: int) -> Embedding:
+    inner = _interior_rule(grid, np.flatnonzero(status == INSIDE), degree)
     volume = VolumeRule(*(np.concatenate([getattr(inner, f), getattr(rules.volume, f), getattr(fitted, f)])
                           for f in ("x", "w", "element")))
-    return Embedding(grid, status, volume, surface, names, rules.fallback, facets, definition)
+    return Embedding(grid, status, volume, surface, names, rules.fallback, facets, definition, degree)

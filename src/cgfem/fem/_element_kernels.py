@@ -1,9 +1,12 @@
-"""Numba kernels of the H8 element on an axis-aligned cube of size ``h``.
+"""Numba kernels of the Lagrange hexahedra (:mod:`cgfem.fem.element`) on an axis-aligned cube
+of size ``h``.
 
-Points are grouped by element (``offsets``) and given by local coordinates ``xi`` in
-``[-1, 1]^3``; dofs are ``3 * node + component``. Matrices are accumulated straight into
-the data array of a CSR matrix through ``scatter`` (n_elements, 576): the position of entry
-``(3a + i, 3b + k)`` of element ``e`` is ``scatter[e, 24 * (3a + i) + 3b + k]``. Kernels
+An element is given to every kernel by its node table ``ijk`` (n_nodes, 3) of tensor
+indices and its ``order`` (1 or 2); ``n_nodes = ijk.shape[0]``. Points are grouped by element
+(``offsets``) and given by local coordinates ``xi`` in ``[-1, 1]^3``; dofs are
+``3 * node + component``. Matrices are accumulated straight into the data array of a CSR
+matrix through ``scatter`` (n_elements, (3 n_nodes)^2): the position of entry
+``(3a + i, 3b + k)`` of element ``e`` is ``scatter[e, 3 n_nodes (3a + i) + 3b + k]``. Kernels
 that scatter in parallel take elements of one colour (no shared nodes), so no two threads
 add to the same entry.
 """
@@ -13,39 +16,99 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-#: local coordinates (8, 3) of the H8 nodes, in the grid's node order
+#: local coordinates (8, 3) of the trilinear element's nodes, in the grid's node order
 #: (:meth:`cgfem.embedding.grid.CartesianGrid.element_nodes`)
 NODE_XI = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
                     [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=np.float64)
+#: tensor indices of the nodes of the trilinear element (its corners, grid order) and of
+#: the triquadratic one (VTK's triquadratic hexahedron: corners, the 12 edge midpoints of the
+#: bottom, top and vertical edges, the face centres x-, x+, y-, y+, z-, z+, the centre)
+HEX8_IJK = ((NODE_XI + 1.0) / 2.0).astype(np.int64)
+HEX27_IJK = np.array([[0, 0, 0], [2, 0, 0], [2, 2, 0], [0, 2, 0], [0, 0, 2], [2, 0, 2], [2, 2, 2], [0, 2, 2],
+                      [1, 0, 0], [2, 1, 0], [1, 2, 0], [0, 1, 0], [1, 0, 2], [2, 1, 2], [1, 2, 2], [0, 1, 2],
+                      [0, 0, 1], [2, 0, 1], [2, 2, 1], [0, 2, 1],
+                      [0, 1, 1], [2, 1, 1], [1, 0, 1], [1, 2, 1], [1, 1, 0], [1, 1, 2], [1, 1, 1]], np.int64)
 
 
 @njit(cache=True)
-def basis(xi, h, N, dN):
-    """H8 shape functions ``N`` (8,) and physical gradients ``dN`` (8, 3) at ``xi`` (3,):
-    ``N_a = (1 + s_a0 xi_0)(1 + s_a1 xi_1)(1 + s_a2 xi_2) / 8`` with ``s_a = NODE_XI[a]``,
-    ``dN_a/dX = (2 / h) dN_a/dxi`` on a cube of size ``h``. The one H8 evaluation of the
-    package: every other H8 quantity is built on it."""
-    for a in range(8):
-        s0, s1, s2 = NODE_XI[a, 0], NODE_XI[a, 1], NODE_XI[a, 2]
-        f0 = 1.0 + s0 * xi[0]
-        f1 = 1.0 + s1 * xi[1]
-        f2 = 1.0 + s2 * xi[2]
-        N[a] = 0.125 * f0 * f1 * f2
-        scale = 0.25 / h  # (1/8) * (2/h)
-        dN[a, 0] = scale * s0 * f1 * f2
-        dN[a, 1] = scale * s1 * f0 * f2
-        dN[a, 2] = scale * s2 * f0 * f1
+def element_table(n_nodes):
+    """``(ijk, order)`` of the element with ``n_nodes`` nodes per element (8 or 27): for
+    kernels that get the element from a connectivity's width."""
+    if n_nodes == 8:
+        return HEX8_IJK, 1
+    return HEX27_IJK, 2
+
+
+@njit(cache=True)
+def lagrange(order, x, k):
+    """The 1D Lagrange polynomial ``l_k`` of ``order`` (1 or 2) on the equally spaced points
+    of ``[-1, 1]``, and its first and second derivatives, at ``x``:
+    order 1 ``l_0 = (1 - x) / 2``, ``l_1 = (1 + x) / 2``; order 2 ``l_0 = x (x - 1) / 2``,
+    ``l_1 = 1 - x^2``, ``l_2 = x (x + 1) / 2``."""
+    if order == 1:
+        if k == 0:
+            return 0.5 * (1.0 - x), -0.5, 0.0
+        return 0.5 * (1.0 + x), 0.5, 0.0
+    if k == 0:
+        return 0.5 * x * (x - 1.0), x - 0.5, 1.0
+    if k == 1:
+        return 1.0 - x * x, -2.0 * x, -2.0
+    return 0.5 * x * (x + 1.0), x + 0.5, 1.0
+
+
+@njit(cache=True)
+def basis(ijk, order, xi, h, N, dN):
+    """Shape functions ``N`` (n_nodes,) and physical gradients ``dN`` (n_nodes, 3) at ``xi``
+    (3,): ``N_a = l_i(xi_0) l_j(xi_1) l_k(xi_2)`` with ``(i, j, k) = ijk[a]``,
+    ``dN_a/dX = (2 / h) dN_a/dxi`` on a cube of size ``h``. The one element evaluation of the
+    package: every other element quantity is built on it (or on :func:`basis_second`)."""
+    s = 2.0 / h
+    for a in range(ijk.shape[0]):
+        l0, d0, _ = lagrange(order, xi[0], ijk[a, 0])
+        l1, d1, _ = lagrange(order, xi[1], ijk[a, 1])
+        l2, d2, _ = lagrange(order, xi[2], ijk[a, 2])
+        N[a] = l0 * l1 * l2
+        dN[a, 0] = s * d0 * l1 * l2
+        dN[a, 1] = s * l0 * d1 * l2
+        dN[a, 2] = s * l0 * l1 * d2
+
+
+@njit(cache=True)
+def basis_second(ijk, order, xi, h, N, dN, d2N):
+    """:func:`basis` and the physical second derivatives ``d2N`` (n_nodes, 3, 3)."""
+    s = 2.0 / h
+    for a in range(ijk.shape[0]):
+        l0, d0, e0 = lagrange(order, xi[0], ijk[a, 0])
+        l1, d1, e1 = lagrange(order, xi[1], ijk[a, 1])
+        l2, d2, e2 = lagrange(order, xi[2], ijk[a, 2])
+        N[a] = l0 * l1 * l2
+        dN[a, 0] = s * d0 * l1 * l2
+        dN[a, 1] = s * l0 * d1 * l2
+        dN[a, 2] = s * l0 * l1 * d2
+        ss = s * s
+        d2N[a, 0, 0] = ss * e0 * l1 * l2
+        d2N[a, 1, 1] = ss * l0 * e1 * l2
+        d2N[a, 2, 2] = ss * l0 * l1 * e2
+        d2N[a, 0, 1] = d2N[a, 1, 0] = ss * d0 * d1 * l2
+        d2N[a, 0, 2] = d2N[a, 2, 0] = ss * d0 * l1 * d2
+        d2N[a, 1, 2] = d2N[a, 2, 1] = ss * l0 * d1 * d2
 
 
 @njit(cache=True, parallel=True)
-def basis_at(xi, h):
-    """Shape functions ``N`` (n, 8) and physical gradients ``dN`` (n, 8, 3) at ``xi`` (n, 3)."""
-    n = xi.shape[0]
-    N = np.empty((n, 8))
-    dN = np.empty((n, 8, 3))
+def basis_at(ijk, order, xi, h, second):
+    """Shape functions ``N`` (n, n_nodes), physical gradients ``dN`` (n, n_nodes, 3) and, if
+    ``second``, second derivatives ``d2N`` (n, n_nodes, 3, 3) (else (0, n_nodes, 3, 3)) at
+    ``xi`` (n, 3)."""
+    n, m = xi.shape[0], ijk.shape[0]
+    N = np.empty((n, m))
+    dN = np.empty((n, m, 3))
+    d2N = np.empty((n if second else 0, m, 3, 3))
     for p in prange(n):
-        basis(xi[p], h, N[p], dN[p])
-    return N, dN
+        if second:
+            basis_second(ijk, order, xi[p], h, N[p], dN[p], d2N[p])
+        else:
+            basis(ijk, order, xi[p], h, N[p], dN[p])
+    return N, dN, d2N
 
 
 @njit(cache=True)
@@ -96,16 +159,16 @@ def locate(x, origin, h, shape, elements, tol, slots, xi):
 
 
 @njit(cache=True, parallel=True)
-def point_gradients(connectivity, u, xi, offsets, h):
+def point_gradients(ijk, order, connectivity, u, xi, offsets, h):
     """Displacement gradient ``H[p, i, J] = du_i/dX_J`` (n, 3, 3) at every point."""
-    n_el = offsets.size - 1
+    n_el, m = offsets.size - 1, ijk.shape[0]
     H = np.zeros((xi.shape[0], 3, 3))
     for e in prange(n_el):
-        N = np.empty(8)
-        dN = np.empty((8, 3))
+        N = np.empty(m)
+        dN = np.empty((m, 3))
         for p in range(offsets[e], offsets[e + 1]):
-            basis(xi[p], h, N, dN)
-            for a in range(8):
+            basis(ijk, order, xi[p], h, N, dN)
+            for a in range(m):
                 base = 3 * connectivity[e, a]
                 for i in range(3):
                     ua = u[base + i]
@@ -115,17 +178,18 @@ def point_gradients(connectivity, u, xi, offsets, h):
 
 
 @njit(cache=True)
-def _integrate_vector(connectivity, P, values, xi, w, offsets, h, r):
+def _integrate_vector(ijk, order, connectivity, P, values, xi, w, offsets, h, r):
     """``r[3a+i] += sum_p w_p (P[p, i, J] dN_a/dX_J + N_a values[p, i])``; either array may
     be empty (0 rows) and is then left out."""
     use_P = P.shape[0] > 0
     use_values = values.shape[0] > 0
-    N = np.empty(8)
-    dN = np.empty((8, 3))
+    m = ijk.shape[0]
+    N = np.empty(m)
+    dN = np.empty((m, 3))
     for e in range(offsets.size - 1):
         for p in range(offsets[e], offsets[e + 1]):
-            basis(xi[p], h, N, dN)
-            for a in range(8):
+            basis(ijk, order, xi[p], h, N, dN)
+            for a in range(m):
                 base = 3 * connectivity[e, a]
                 for i in range(3):
                     f = 0.0
@@ -137,92 +201,99 @@ def _integrate_vector(connectivity, P, values, xi, w, offsets, h, r):
 
 
 @njit(cache=True)
-def integrate_force(connectivity, P, xi, w, offsets, h, r):
+def integrate_force(ijk, order, connectivity, P, xi, w, offsets, h, r):
     """``r[3a+i] += sum_p w_p P[p, i, J] dN_a/dX_J`` (internal force)."""
-    _integrate_vector(connectivity, P, np.empty((0, 3)), xi, w, offsets, h, r)
+    _integrate_vector(ijk, order, connectivity, P, np.empty((0, 3)), xi, w, offsets, h, r)
 
 
 @njit(cache=True, parallel=True)
-def integrate_tangent(A, first, xi, w, offsets, h, elements, scatter, data):
+def integrate_tangent(ijk, order, A, first, xi, w, offsets, h, elements, scatter, data):
     """``K[3a+i, 3b+k] += sum_p w_p dN_a/dX_J A[p, i, J, k, L] dN_b/dX_L`` over the listed
-    elements (``A[p - first]`` at point ``p``; ``A[0]`` everywhere if ``first < 0``), accumulated into CSR ``data``. The elements run in parallel, so the listed
-    ones must share no node (one colour of :func:`cgfem.fem.assembly.colours`)."""
+    elements (``A[p - first]`` at point ``p``; ``A[0]`` everywhere if ``first < 0``),
+    accumulated into CSR ``data``. The elements run in parallel, so the listed ones must share
+    no node (one colour of :func:`cgfem.fem.assembly.colours`)."""
+    m = ijk.shape[0]
+    nd = 3 * m
     for q in prange(elements.size):
         e = elements[q]
-        N = np.empty(8)
-        dN = np.empty((8, 3))
-        ke = np.zeros((24, 24))
-        T = np.empty((3, 3, 8, 3))  # T[i, J, b, k] = A[i, J, k, L] dN_b/dX_L
+        N = np.empty(m)
+        dN = np.empty((m, 3))
+        ke = np.zeros((nd, nd))
+        T = np.empty((3, 3, m, 3))  # T[i, J, b, k] = A[i, J, k, L] dN_b/dX_L
         for p in range(offsets[e], offsets[e + 1]):
-            basis(xi[p], h, N, dN)
+            basis(ijk, order, xi[p], h, N, dN)
             ap = p - first if first >= 0 else 0
             for i in range(3):
                 for J in range(3):
-                    for b in range(8):
+                    for b in range(m):
                         for k in range(3):
                             T[i, J, b, k] = w[p] * (A[ap, i, J, k, 0] * dN[b, 0]
                                                     + A[ap, i, J, k, 1] * dN[b, 1]
                                                     + A[ap, i, J, k, 2] * dN[b, 2])
-            for a in range(8):
+            for a in range(m):
                 for i in range(3):
                     row = 3 * a + i
-                    for b in range(8):
+                    for b in range(m):
                         for k in range(3):
                             ke[row, 3 * b + k] += (dN[a, 0] * T[i, 0, b, k] + dN[a, 1] * T[i, 1, b, k]
                                                    + dN[a, 2] * T[i, 2, b, k])
-        for m in range(24):
-            for n in range(24):
-                data[scatter[e, 24 * m + n]] += ke[m, n]
+        for r in range(nd):
+            for c in range(nd):
+                data[scatter[e, nd * r + c]] += ke[r, c]
 
 
 @njit(cache=True, parallel=True)
 def scatter_reference(ke, elements, scatter, data):
-    """Add one element matrix ``ke`` (24, 24) for each listed element (of one colour)."""
+    """Add one element matrix ``ke`` (nd, nd) for each listed element (of one colour)."""
+    nd = ke.shape[0]
     for q in prange(elements.size):
         e = elements[q]
-        for m in range(24):
-            for n in range(24):
-                data[scatter[e, 24 * m + n]] += ke[m, n]
+        for r in range(nd):
+            for c in range(nd):
+                data[scatter[e, nd * r + c]] += ke[r, c]
 
 
 @njit(cache=True)
-def integrate_mass(xi, w, offsets, h, components, elements, scatter, data):
+def integrate_mass(ijk, order, xi, w, offsets, h, components, elements, scatter, data):
     """``K[3a+i, 3b+i] += sum_p w_p N_a N_b`` for the components ``i`` with
     ``components[i]`` true (penalty of weak Dirichlet conditions)."""
-    N = np.empty(8)
-    dN = np.empty((8, 3))
+    m = ijk.shape[0]
+    nd = 3 * m
+    N = np.empty(m)
+    dN = np.empty((m, 3))
     for q in range(elements.size):
         e = elements[q]
-        me = np.zeros((8, 8))
+        me = np.zeros((m, m))
         for p in range(offsets[e], offsets[e + 1]):
-            basis(xi[p], h, N, dN)
-            for a in range(8):
-                for b in range(8):
+            basis(ijk, order, xi[p], h, N, dN)
+            for a in range(m):
+                for b in range(m):
                     me[a, b] += w[p] * N[a] * N[b]
-        for a in range(8):
-            for b in range(8):
+        for a in range(m):
+            for b in range(m):
                 for i in range(3):
                     if components[i]:
-                        data[scatter[e, 24 * (3 * a + i) + 3 * b + i]] += me[a, b]
+                        data[scatter[e, nd * (3 * a + i) + 3 * b + i]] += me[a, b]
 
 
 @njit(cache=True)
-def integrate_load(connectivity, values, xi, w, offsets, h, r):
+def integrate_load(ijk, order, connectivity, values, xi, w, offsets, h, r):
     """``r[3a+i] += sum_p w_p N_a values[p, i]`` (tractions, body forces, multipliers)."""
-    _integrate_vector(connectivity, np.empty((0, 3, 3)), values, xi, w, offsets, h, r)
+    _integrate_vector(ijk, order, connectivity, np.empty((0, 3, 3)), values, xi, w, offsets, h, r)
 
 
 @njit(cache=True, parallel=True)
-def point_values(connectivity, nodal, xi, offsets, h):
+def point_values(ijk, order, connectivity, nodal, xi, offsets, h):
     """Values (n, k) at the points of a nodal field ``nodal`` (n_nodes, k)."""
     k = nodal.shape[1]
+    m = ijk.shape[0]
     out = np.zeros((xi.shape[0], k))
     for e in prange(offsets.size - 1):
-        N = np.empty(8)
-        dN = np.empty((8, 3))
+        N = np.empty(m)
+        dN = np.empty((m, 3))
         for p in range(offsets[e], offsets[e + 1]):
-            basis(xi[p], h, N, dN)
-            for a in range(8):
+            basis(ijk, order, xi[p], h, N, dN)
+            for a in range(m):
                 node = connectivity[e, a]
                 for c in range(k):
                     out[p, c] += N[a] * nodal[node, c]

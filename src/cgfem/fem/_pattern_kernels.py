@@ -1,4 +1,4 @@
-"""Numba kernels that build the CSR pattern of an H8 space in O(n) (no global sort).
+"""Numba kernels that build the CSR pattern of a hexahedral space in O(n) (no global sort).
 
 Nodes are coupled when they share an element or are listed as an extra pair; each node
 pair is a dense 3x3 block of dofs. See :mod:`cgfem.fem.assembly` for the layout.
@@ -31,7 +31,7 @@ def node_neighbours(connectivity, n_nodes, extra_a, extra_b):
     """Sorted neighbour lists (ptr, nbr) of every node, itself included."""
     ne = connectivity.shape[0]
     el_nodes = connectivity.ravel()
-    el_ids = np.repeat(np.arange(ne), 8)
+    el_ids = np.repeat(np.arange(ne), connectivity.shape[1])
     el_ptr, el_of = _csr_of_lists(el_nodes, el_ids, n_nodes)
     keys = np.concatenate((extra_a, extra_b))
     vals = np.concatenate((extra_b, extra_a))
@@ -49,7 +49,7 @@ def node_neighbours(connectivity, n_nodes, extra_a, extra_b):
             m = 0
             for j in range(el_ptr[a], el_ptr[a + 1]):
                 e = el_of[j]
-                for lb in range(8):
+                for lb in range(connectivity.shape[1]):
                     b = connectivity[e, lb]
                     if mark[b] != a:
                         mark[b] = a
@@ -71,7 +71,8 @@ def node_neighbours(connectivity, n_nodes, extra_a, extra_b):
 @njit(cache=True)
 def dof_pattern(node_ptr, nbr, connectivity, scatter):
     """CSR ``(indptr, indices)`` of the dofs and the element scatter map (filled in place,
-    ``scatter[e, 24 (3a + i) + 3b + k]`` = data position of element entry ``(3a+i, 3b+k)``)."""
+    ``scatter[e, nd (3a + i) + 3b + k]`` = data position of element entry ``(3a+i, 3b+k)``,
+    ``nd = 3 connectivity.shape[1]``)."""
     n_nodes = node_ptr.size - 1
     indptr = np.zeros(3 * n_nodes + 1, np.int64)
     for a in range(n_nodes):
@@ -87,15 +88,17 @@ def dof_pattern(node_ptr, nbr, connectivity, scatter):
                 b = nbr[node_ptr[a] + r]
                 for k in range(3):
                     indices[start + 3 * r + k] = 3 * b + k
+    m = connectivity.shape[1]
+    nd = 3 * m
     for e in range(connectivity.shape[0]):
-        for la in range(8):
+        for la in range(m):
             a = connectivity[e, la]
             lo, deg = node_ptr[a], node_ptr[a + 1] - node_ptr[a]
-            for lb in range(8):
+            for lb in range(m):
                 b = connectivity[e, lb]
                 rank = np.searchsorted(nbr[lo:lo + deg], b)
                 base = indptr[3 * a] + 3 * rank
                 for i in range(3):
                     for k in range(3):
-                        scatter[e, 24 * (3 * la + i) + 3 * lb + k] = base + i * 3 * deg + k
+                        scatter[e, nd * (3 * la + i) + 3 * lb + k] = base + i * 3 * deg + k
     return indptr, indices

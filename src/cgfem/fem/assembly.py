@@ -1,4 +1,4 @@
-"""Sparsity pattern of an H8 space and the maps that assemble into it.
+"""Sparsity pattern of a hexahedral space and the maps that assemble into it.
 
 The pattern couples two nodes when they share an active element (or, with ghost-penalty
 faces, a pair of neighbouring elements); every node pair is a dense 3x3 block. The CSR
@@ -22,8 +22,9 @@ class Pattern:
     """CSR structure of a (n_dofs x n_dofs) matrix over one space.
 
     indptr, indices : CSR arrays (int64)
-    scatter : (n_elements, 576) data position of entry ``(m, n)`` of element ``e`` at
-        ``[e, 24 m + n]``
+    scatter : (n_elements, nd^2) data position of entry ``(m, n)`` of element ``e`` at
+        ``[e, nd m + n]``, ``nd`` the element's dofs (24 for the trilinear element, 81 for the
+        triquadratic one)
     colours : element lists of one colour each; elements of one colour share no node
     """
 
@@ -76,6 +77,7 @@ def build_pattern(space: Space, extra_pairs: np.ndarray | None = None) -> Patter
     node_ptr, nbr = node_neighbours(conn, space.n_nodes, np.ascontiguousarray(extra[:, 0]),
                                     np.ascontiguousarray(extra[:, 1]))
     nnz = 9 * int(node_ptr[-1])
-    scatter = np.empty((space.n_elements, 576), np.int32 if nnz < 2**31 - 1 else np.int64)
+    nd = space.element.n_dofs
+    scatter = np.empty((space.n_elements, nd * nd), np.int32 if nnz < 2**31 - 1 else np.int64)
     indptr, indices = dof_pattern(node_ptr, nbr, conn, scatter)
     return Pattern(space.n_dofs, indptr, indices, scatter, colours(space))

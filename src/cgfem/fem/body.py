@@ -1,9 +1,9 @@
-"""One body of a case, discretized: its H8 space and every term acting on it.
+"""One body of a case, discretized: its hexahedral space and every term acting on it.
 
 A :class:`BodyModel` sums its terms (bulk elasticity, ghost penalty, weak Dirichlet
 conditions, dead tractions and body forces) into a residual and a CSR tangent over its own
 dofs, for a load factor ``t`` and a frozen recovered stress (the outer-loop state). Bodies
-know nothing of each other; the solver stacks them (and, later, couples them by contact).
+know nothing of each other; the solver stacks them and couples them by contact.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from cgfem.fem.assembly import Pattern, build_pattern
 from cgfem.fem.boundary import (BoundaryPoints, WeakDirichlet, body_force_load, surface_mask,
                                 traction_load)
 from cgfem.fem.elasticity import Elasticity
+from cgfem.fem.element import HEX8, Hexahedron
 from cgfem.fem.ghost import ghost_penalty
 from cgfem.fem.space import ElementPoints, Space
 
@@ -43,12 +44,18 @@ class BodyModel:
 
     @classmethod
     def build(cls, body: Body, embedding: Embedding, boundary: list, options: SolverOptions,
-              finite: bool) -> "BodyModel":
-        """The model of ``body`` on ``embedding`` with the case's ``boundary`` entries that
-        name it (each a :class:`DisplacementBC` or :class:`TractionBC`); ``options`` gives
-        the weak-Dirichlet and ghost-penalty parameters. In small strain every material is
-        its linearization (linear elastic with the same E and nu)."""
-        space = Space.from_embedding(embedding)
+              finite: bool, element: Hexahedron = HEX8) -> "BodyModel":
+        """The model of ``body`` on ``embedding`` with ``element`` and the case's ``boundary``
+        entries that name it (each a :class:`DisplacementBC` or :class:`TractionBC`);
+        ``options`` gives the weak-Dirichlet and ghost-penalty parameters. In small strain
+        every material is its linearization (linear elastic with the same E and nu). The
+        embedding's rules must integrate the element's degree (``embedding.degree >=
+        element.degree``), else ``ValueError``."""
+        degree = getattr(embedding, "degree", 2)
+        if degree < element.degree:
+            raise ValueError(f"the embedding's rules are exact to degree {degree}, the order-"
+                             f"{element.order} element needs {element.degree}")
+        space = Space.from_embedding(embedding, element)
         lam, mu = body.material.lame()          # Lame(lam, mu)
         model = model_id(body.material.model) if finite else LINEAR_ELASTIC
         G, extra = ghost_penalty(space, options.ghost_penalty, lam + 2.0 * mu)

@@ -61,7 +61,7 @@ class BoundaryPoints:
         nodal = np.asarray(nodal, float)
         flat = np.ascontiguousarray(nodal.reshape(nodal.shape[0], -1))
         p = self.points
-        out = kern.point_values(space.connectivity, flat, p.xi, p.offsets, space.h)
+        out = kern.point_values(*space.kernel_element, space.connectivity, flat, p.xi, p.offsets, space.h)
         return out.reshape((-1,) + nodal.shape[1:])
 
     def values(self, space: Space, u: np.ndarray) -> np.ndarray:
@@ -77,8 +77,8 @@ class BoundaryPoints:
     def integrate(self, space: Space, values: np.ndarray, r: np.ndarray) -> None:
         """``r += int N_a values_i dA``."""
         p = self.points
-        kern.integrate_load(space.connectivity, np.ascontiguousarray(values), p.xi, p.w, p.offsets,
-                            space.h, r)
+        kern.integrate_load(*space.kernel_element, space.connectivity, np.ascontiguousarray(values),
+                            p.xi, p.w, p.offsets, space.h, r)
 
 
 def surface_mask(surface: SurfaceQuadrature, patch_names: tuple[str, ...],
@@ -137,8 +137,8 @@ class WeakDirichlet:
             data = self.pattern.zeros()
             p = self.boundary.points
             elements = np.flatnonzero(np.diff(p.offsets) > 0)
-            kern.integrate_mass(p.xi, p.w, p.offsets, self.space.h, self.components, elements,
-                                self.pattern.scatter, data)
+            kern.integrate_mass(*self.space.kernel_element, p.xi, p.w, p.offsets, self.space.h,
+                                self.components, elements, self.pattern.scatter, data)
             pos = np.flatnonzero(data)
             self._penalty = (pos, self.beta * data[pos])
         return self._penalty
@@ -156,6 +156,7 @@ def body_force_load(space: Space, points: ElementPoints, value: VectorExpression
     """``f_a = int N_a b(x) dV`` (n_dofs,) of a dead body force (N/m^3)."""
     x = points.x
     f = np.zeros(space.n_dofs)
-    kern.integrate_load(space.connectivity, np.ascontiguousarray(value(x[:, 0], x[:, 1], x[:, 2])),
-                        points.xi, points.w, points.offsets, space.h, f)
+    kern.integrate_load(*space.kernel_element, space.connectivity,
+                        np.ascontiguousarray(value(x[:, 0], x[:, 1], x[:, 2])), points.xi, points.w,
+                        points.offsets, space.h, f)
     return f

@@ -5,7 +5,7 @@ share one path: the displacement gradient ``H`` at the volume points, the consti
 gives the stress ``P`` (Cauchy for small strain, first Piola-Kirchhoff for finite) and the
 tangent ``A = dP/dH``, and the element kernels integrate ``int P : grad v`` and
 ``int grad v : A : grad du``. In the linear case the stiffness is computed once, and the
-inside elements of the uniform grid all get one reference matrix (their 2x2x2 Gauss rule
+inside elements of the uniform grid all get one reference matrix (their tensor Gauss rule
 is the same up to translation), so only cut elements are integrated point by point.
 """
 
@@ -18,6 +18,7 @@ import numpy as np
 from cgfem.fem import _element_kernels as kern
 from cgfem.fem._material_kernels import LINEAR_ELASTIC, stress_batch, tangent_batch
 from cgfem.fem.assembly import Pattern
+from cgfem.fem.element import HEX8, Hexahedron
 from cgfem.fem.space import ElementPoints, Space
 from cgfem.quadrature_rules import tensor_gauss
 
@@ -50,7 +51,8 @@ class Elasticity:
     def gradients(self, u: np.ndarray, points: ElementPoints | None = None) -> np.ndarray:
         """Displacement gradient (n, 3, 3) at ``points`` (default: the volume rule)."""
         pts = self.points if points is None else points
-        return kern.point_gradients(self.space.connectivity, u, pts.xi, pts.offsets, self.space.h)
+        return kern.point_gradients(*self.space.kernel_element, self.space.connectivity, u, pts.xi,
+                                    pts.offsets, self.space.h)
 
     def stress(self, u: np.ndarray, points: ElementPoints | None = None) -> np.ndarray:
         """Stress ``P`` (n, 3, 3) at ``points``: Cauchy (small strain) or first Piola-Kirchhoff."""
@@ -67,7 +69,8 @@ class Elasticity:
         pts, h = self.points, self.space.h
         H = self.gradients(u)
         P = stress_batch(self.model, H, self.mu, self.lam)[1]
-        kern.integrate_force(self.space.connectivity, P, pts.xi, pts.w, pts.offsets, h, r)
+        element = self.space.kernel_element
+        kern.integrate_force(*element, self.space.connectivity, P, pts.xi, pts.w, pts.offsets, h, r)
         if data is None:
             return
         # the tangent tensors of a chunk of elements at a time (81 numbers per point)
@@ -77,7 +80,7 @@ class Elasticity:
             A = tangent_batch(self.model, H[p0:p1], self.mu, self.lam)[2]
             for elements in self.pattern.colours:
                 chunk = elements[(elements >= e0) & (elements < e1)]
-                kern.integrate_tangent(A, p0, pts.xi, pts.w, pts.offsets, h, chunk,
+                kern.integrate_tangent(*element, A, p0, pts.xi, pts.w, pts.offsets, h, chunk,
                                        self.pattern.scatter, data)
 
     def _stiffness(self) -> np.ndarray:
@@ -92,23 +95,26 @@ class Elasticity:
         data = pat.zeros()
         zero = np.zeros((1, 3, 3))
         A = tangent_batch(self.model, zero, self.mu, self.lam)[2]
-        ke = reference_matrix(A[0], h)
+        ke = reference_matrix(A[0], h, space.element)
         cut = space.cut
         for elements in pat.colours:
             inner = elements[~cut[elements]]
             kern.scatter_reference(ke, inner, pat.scatter, data)
-            kern.integrate_tangent(A, -1, pts.xi, pts.w, pts.offsets, h, elements[cut[elements]],
-                                   pat.scatter, data)
+            kern.integrate_tangent(*space.kernel_element, A, -1, pts.xi, pts.w, pts.offsets, h,
+                                   elements[cut[elements]], pat.scatter, data)
         return data
 
 
-def reference_matrix(A: np.ndarray, h: float) -> np.ndarray:
-    """Stiffness (24, 24) of a whole cube of size ``h`` with the constant tangent ``A``
-    (3, 3, 3, 3), by 2x2x2 Gauss (exact for H8)."""
-    xi, w = tensor_gauss(2, 3)
+def reference_matrix(A: np.ndarray, h: float, element: Hexahedron = HEX8) -> np.ndarray:
+    """Stiffness (nd, nd) of ``element`` on a whole cube of size ``h`` with the constant
+    tangent ``A`` (3, 3, 3, 3), by the tensor Gauss rule of ``element.gauss_points`` points per
+    direction (exact: the integrand has degree ``2 order`` per variable)."""
+    xi, w = tensor_gauss(element.gauss_points, 3)
     w = w * (0.5 * h) ** 3
-    offsets = np.array([0, 8], np.int64)
-    scatter = np.arange(576, dtype=np.int64).reshape(1, 576)
-    data = np.zeros(576)
-    kern.integrate_tangent(A[None], -1, xi, w, offsets, h, np.array([0], np.int64), scatter, data)
-    return data.reshape(24, 24)
+    nd = element.n_dofs
+    offsets = np.array([0, xi.shape[0]], np.int64)
+    scatter = np.arange(nd * nd, dtype=np.int64).reshape(1, nd * nd)
+    data = np.zeros(nd * nd)
+    kern.integrate_tangent(element.node_ijk, element.order, A[None], -1, xi, w, offsets, h,
+                           np.array([0], np.int64), scatter, data)
+    return data.reshape(nd, nd)

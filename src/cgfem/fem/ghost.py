@@ -5,18 +5,21 @@ the matrix becomes arbitrarily ill-conditioned as the sliver shrinks, iterative 
 and direct ones lose digits. Following Burman's ghost penalty, we add on every grid face
 shared by two active elements of which at least one is cut
 
-    j(u, v) = gamma * M * h * int_F [du/dn] . [dv/dn] dF,
+    j(u, v) = gamma * M * sum_{k=1..p} h^(2k - 1) int_F [d^k u/dn^k] . [d^k v/dn^k] dF,
 
-with ``[du/dn]`` the jump of the normal derivative of the displacement across the face and
-``M = lambda + 2 mu`` the P-wave modulus. For trilinear elements the normal derivative is
-the only discontinuous part of the gradient and the second normal derivative vanishes, so
-this one term ties a sliver's nodes to the well-supported element next to it. It is zero
-for every linear displacement field (the patch test stays exact) and of order ``h`` for a
+with ``[d^k u/dn^k]`` the jump of the k-th normal derivative of the displacement across the
+face, ``p`` the element's order and ``M = lambda + 2 mu`` the P-wave modulus. A polynomial
+of degree ``p`` per variable is continuous with its tangential derivatives across a face, so
+the normal derivatives up to order ``p`` are all that can jump; the penalty ties a sliver's
+nodes to the well-supported element next to it. It is zero for every polynomial of degree
+``p`` on the pair of elements (the patch test stays exact) and of order ``h^p`` for a
 smooth solution, so the optimal rate in the energy norm is kept. The term is linear in ``u``
 and is also used, unchanged, in finite strain (it acts on the displacement field, not on
-the stress). Effect measured in ``tests/test_ghost.py`` and in the issue note.
+the stress). Its effect on the conditioning is measured in
+``tests/physics/test_ghost.py`` (docs/validation.md).
 
-On a uniform grid the face matrix is one (16, 16) scalar matrix per axis, computed once.
+On a uniform grid the face matrix is one (2 n, 2 n) scalar matrix per axis (``n`` nodes per
+element), computed once.
 """
 
 from __future__ import annotations
@@ -24,7 +27,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from cgfem.fem.space import Space, shape_functions
+from cgfem.fem.element import HEX8, Hexahedron
+from cgfem.fem.space import Space
 from cgfem.quadrature_rules import tensor_gauss
 
 
@@ -52,19 +56,25 @@ def face_pairs(space: Space) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(pairs).astype(np.int64), np.concatenate(axes)
 
 
-def face_matrix(axis: int, h: float) -> np.ndarray:
-    """``int_F [dN/dn] [dN/dn] dF`` (16, 16) for the face between a lower and an upper
-    element along ``axis`` (nodes of the lower element first), by 2x2 Gauss (exact)."""
-    g, gw = tensor_gauss(2, 2)                        # (4, 2) points on the face, (4,) weights
+def face_matrix(axis: int, h: float, element: Hexahedron = HEX8) -> np.ndarray:
+    """``sum_k h^(2k - 2) int_F [d^k N/dn^k] [d^k N/dn^k] dF`` (2 n, 2 n), ``k = 1..order``,
+    for the face between a lower and an upper element along ``axis`` (nodes of the lower
+    element first), by tensor Gauss on the face (exact: degree ``2 order`` per variable)."""
+    g, gw = tensor_gauss(element.gauss_points, 2)      # points on the face, weights
     others = [a for a in range(3) if a != axis]
     xi = np.zeros((g.shape[0], 3))
     xi[:, others] = g
     xi_lower, xi_upper = xi.copy(), xi.copy()
     xi_lower[:, axis], xi_upper[:, axis] = 1.0, -1.0   # the face is the lower element's + face
-    d_lower = shape_functions(xi_lower, h)[1][:, :, axis]   # (4, 8) normal derivatives
-    d_upper = shape_functions(xi_upper, h)[1][:, :, axis]
-    jump = np.concatenate([-d_lower, d_upper], axis=1)  # (4, 16)
-    return np.einsum("q,qa,qb->ab", gw * (0.5 * h) ** 2, jump, jump)
+    _, d_lower, dd_lower = element.tabulate(xi_lower, h, second=True)
+    _, d_upper, dd_upper = element.tabulate(xi_upper, h, second=True)
+    derivatives = [(d_lower[:, :, axis], d_upper[:, :, axis]),
+                   (dd_lower[:, :, axis, axis], dd_upper[:, :, axis, axis])]
+    out = np.zeros((2 * element.n_nodes, 2 * element.n_nodes))
+    for k, (lower, upper) in enumerate(derivatives[:element.order], start=1):
+        jump = np.concatenate([-lower, upper], axis=1)  # (q, 2 n)
+        out += h ** (2 * k - 2) * np.einsum("q,qa,qb->ab", gw * (0.5 * h) ** 2, jump, jump)
+    return out
 
 
 def ghost_penalty(space: Space, gamma: float, modulus: float) -> tuple[sp.csr_matrix, np.ndarray]:
@@ -76,7 +86,7 @@ def ghost_penalty(space: Space, gamma: float, modulus: float) -> tuple[sp.csr_ma
         return sp.csr_matrix((n, n)), np.zeros((0, 2), np.int64)
     scale = gamma * modulus * space.h
     nodes = np.concatenate([space.connectivity[pairs[:, 0]], space.connectivity[pairs[:, 1]]], axis=1)
-    mats = np.stack([face_matrix(a, space.h) for a in range(3)])[axes] * scale   # (m, 16, 16)
+    mats = np.stack([face_matrix(a, space.h, space.element) for a in range(3)])[axes] * scale
     rows = np.broadcast_to(nodes[:, :, None], mats.shape)
     cols = np.broadcast_to(nodes[:, None, :], mats.shape)
     blocks = []

@@ -1,11 +1,14 @@
-"""The trilinear (H8) displacement field of one body on its active grid elements.
+"""The displacement field of one body on its active grid elements, for a hexahedral element
+of order 1 or 2 (:mod:`cgfem.fem.element`).
 
 Active elements (inside and cut) and their nodes get compact numbers; the displacement has
-three components per active node, interleaved: dof ``3 * node + component``. Quadrature
-points of the embedding are regrouped per active element (:class:`ElementPoints`) and carry
-their local coordinates ``xi = (x - x_c) / (h / 2)`` in ``[-1, 1]^3`` (points of a
-moment-fitted rule may lie anywhere in the cube), which is all the element kernels need:
-on an axis-aligned cube ``dN/dx = (2 / h) dN/dxi``.
+three components per active node, interleaved: dof ``3 * node + component``. The nodes of
+order ``p`` lie on the lattice of spacing ``h / p`` of the grid (its nodes for ``p = 1``), and
+are numbered by ascending lattice id. Quadrature points of the embedding are regrouped per
+active element (:class:`ElementPoints`) and carry their local coordinates
+``xi = (x - x_c) / (h / 2)`` in ``[-1, 1]^3`` (points of a moment-fitted rule may lie anywhere
+in the cube), which is all the element kernels need: on an axis-aligned cube
+``dN/dx = (2 / h) dN/dxi``.
 """
 
 from __future__ import annotations
@@ -14,25 +17,42 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cgfem.embedding.export import active_hex_mesh
 from cgfem.embedding.grid import CartesianGrid
 from cgfem.embedding.quadrature import CUT, Embedding
 from cgfem.fem import _element_kernels as kern
 from cgfem.fem._element_kernels import NODE_XI
+from cgfem.fem.element import HEX8, Hexahedron
 
-__all__ = ["NODE_XI", "ElementPoints", "Space", "shape_functions"]
+__all__ = ["NODE_XI", "ElementPoints", "Space", "element_mesh", "shape_functions"]
 
 #: distance (in units of h) from a grid plane within which :meth:`Space.locate` also looks
 #: for a point in the element across the plane
 LOCATE_TOL = 1e-10
 
 
-def shape_functions(xi: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
-    """H8 shape functions ``N`` (n, 8) and their physical gradients ``dN`` (n, 8, 3),
-    ``dN[p, a, J] = dN_a/dX_J``, at local coordinates ``xi`` (n, 3) of a cube of size ``h``
-    (node order :data:`NODE_XI`; evaluated by :func:`cgfem.fem._element_kernels.basis`)."""
-    xi = np.ascontiguousarray(np.asarray(xi, float).reshape(-1, 3))
-    return kern.basis_at(xi, float(h))
+def shape_functions(xi: np.ndarray, h: float, element: Hexahedron = HEX8) -> tuple[np.ndarray, np.ndarray]:
+    """Shape functions ``N`` (n, n_nodes) and their physical gradients ``dN`` (n, n_nodes, 3),
+    ``dN[p, a, J] = dN_a/dX_J``, of ``element`` at local coordinates ``xi`` (n, 3) of a cube
+    of size ``h`` (:meth:`cgfem.fem.element.Hexahedron.tabulate`)."""
+    return element.tabulate(xi, h)
+
+
+def element_mesh(grid: CartesianGrid, elements: np.ndarray, element: Hexahedron = HEX8
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The nodes of ``element`` on the grid elements ``elements`` (m,) (ascending ids).
+
+    Returns ``coordinates`` (n, 3) of the nodes in ascending id on the lattice of spacing
+    ``h / order`` (for order 1 the grid's nodes, as :func:`cgfem.embedding.export.active_hex_mesh`)
+    and ``connectivity`` (m, n_nodes), each element's nodes in the element's node order.
+    """
+    p = element.order
+    shape = np.asarray(grid.shape, np.int64) * p + 1
+    ijk = p * grid.element_ijk(np.asarray(elements, np.int64))[:, None, :] + element.node_ijk[None, :, :]
+    ids = (ijk[..., 0] * shape[1] + ijk[..., 1]) * shape[2] + ijk[..., 2]
+    nodes = np.unique(ids)
+    lattice = np.stack(np.unravel_index(nodes, tuple(shape)), axis=-1)
+    coordinates = np.asarray(grid.origin) + lattice.astype(float) * (grid.h / p)
+    return coordinates.reshape(-1, 3), np.searchsorted(nodes, ids).astype(np.int64)
 
 
 @dataclass(frozen=True)
@@ -58,12 +78,14 @@ class ElementPoints:
 
 @dataclass(frozen=True)
 class Space:
-    """H8 field over the active elements of a grid.
+    """A hexahedral field over the active elements of a grid.
 
     elements : (n_elements,) grid ids of the active elements, ascending
-    connectivity : (n_elements, 8) compact node numbers, H8 order
+    connectivity : (n_elements, n_nodes per element) compact node numbers, in the element's
+        node order
     coordinates : (n_nodes, 3) node positions
     cut : (n_elements,) bool, element cut by the boundary
+    element : the element (:data:`~cgfem.fem.element.HEX8` or :data:`~cgfem.fem.element.HEX27`)
     """
 
     grid: CartesianGrid
@@ -71,18 +93,27 @@ class Space:
     connectivity: np.ndarray
     coordinates: np.ndarray
     cut: np.ndarray
+    element: Hexahedron = HEX8
 
     @classmethod
-    def of_elements(cls, grid: CartesianGrid, elements: np.ndarray, cut: np.ndarray) -> "Space":
-        """The space on the grid elements ``elements`` (ascending ids); nodes are numbered
-        in ascending grid id, as in the VTU meshes of :func:`active_hex_mesh`."""
-        coordinates, connectivity = active_hex_mesh(grid, elements)
-        return cls(grid, np.asarray(elements, np.int64), connectivity, coordinates, np.asarray(cut, bool))
+    def of_elements(cls, grid: CartesianGrid, elements: np.ndarray, cut: np.ndarray,
+                    element: Hexahedron = HEX8) -> "Space":
+        """The space of ``element`` on the grid elements ``elements`` (ascending ids); nodes
+        are numbered by ascending lattice id (:func:`element_mesh`)."""
+        coordinates, connectivity = element_mesh(grid, elements, element)
+        return cls(grid, np.asarray(elements, np.int64), connectivity, coordinates, np.asarray(cut, bool),
+                   element)
 
     @classmethod
-    def from_embedding(cls, embedding: Embedding) -> "Space":
+    def from_embedding(cls, embedding: Embedding, element: Hexahedron = HEX8) -> "Space":
         elements = embedding.active_elements
-        return cls.of_elements(embedding.grid, elements, embedding.status[elements] == CUT)
+        return cls.of_elements(embedding.grid, elements, embedding.status[elements] == CUT, element)
+
+    @property
+    def kernel_element(self) -> tuple[np.ndarray, int]:
+        """``(ijk, order)``: the element as the kernels of :mod:`cgfem.fem._element_kernels`
+        take it."""
+        return self.element.node_ijk, self.element.order
 
     @property
     def n_elements(self) -> int:
@@ -102,8 +133,9 @@ class Space:
 
     @property
     def element_dofs(self) -> np.ndarray:
-        """(n_elements, 24) dofs of every element, node-major: ``3 * node + component``."""
-        return (3 * self.connectivity[:, :, None] + np.arange(3)).reshape(-1, 24)
+        """(n_elements, 3 n_nodes per element) dofs of every element, node-major:
+        ``3 * node + component``."""
+        return (3 * self.connectivity[:, :, None] + np.arange(3)).reshape(-1, self.element.n_dofs)
 
     def slot(self, grid_elements: np.ndarray) -> np.ndarray:
         """Compact numbers of grid elements (-1 for an inactive one)."""
@@ -156,7 +188,7 @@ class Space:
 
     def interpolate(self, nodal: np.ndarray, slots: np.ndarray, xi: np.ndarray) -> np.ndarray:
         """Values at points of a nodal field ``nodal`` (n_nodes, ...)."""
-        n = shape_functions(xi, self.h)[0]
+        n = shape_functions(xi, self.h, self.element)[0]
         values = nodal[self.connectivity[slots]]
         return np.einsum("pa,pa...->p...", n, values)
 
@@ -198,6 +230,7 @@ class Space:
         xs = np.ascontiguousarray(xi[order])
         values = np.full((slots.size, 3), np.nan)
         gradients = np.full((slots.size, 3, 3), np.nan)
-        values[order] = kern.point_values(self.connectivity, u.reshape(-1, 3), xs, offsets, self.h)
-        gradients[order] = kern.point_gradients(self.connectivity, u, xs, offsets, self.h)
+        ijk, p = self.kernel_element
+        values[order] = kern.point_values(ijk, p, self.connectivity, u.reshape(-1, 3), xs, offsets, self.h)
+        gradients[order] = kern.point_gradients(ijk, p, self.connectivity, u, xs, offsets, self.h)
         return values, gradients

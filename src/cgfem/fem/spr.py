@@ -1,44 +1,28 @@
 """Superconvergent patch recovery (SPR, Zienkiewicz-Zhu) on cut grids and the ZZ estimate.
 
-The recovered stress ``sigma*`` is continuous and trilinear: ``sigma* = sum_a N_a sigma*_a``
-with nodal values obtained from least-squares fits of complete linear polynomials
-``c0 + c . (x - x_a) / h`` (scaled local coordinates) to FE stress samples, one fit per
-node and per component (the operator is the same for all: six independent fits for a
-symmetric tensor).
+The recovered stress ``sigma*`` is continuous and interpolated with the space's own shape
+functions, ``sigma* = sum_a N_a sigma*_a``, with nodal values from least-squares fits of
+complete polynomials in scaled local coordinates ``(x - x_b) / h`` to FE stress samples, one
+fit per grid vertex ``b`` and per component (the operator is the same for all: six
+independent fits for a symmetric tensor).
 
-Sampling. One sample per active element, at the centre of its cube, also for cut elements
-(whether the centre lies in the material or not: the FE stress is a polynomial on the whole
-cube). The H8 gradient of a smooth field's interpolant is superconvergent there
-(``O(h^2)``), while at 2x2x2 Gauss points it is only ``O(h)``; all samples weigh the same.
+Sampling and fits. Order 1: one sample per active element at the centre of its cube (where
+the trilinear gradient of a smooth field is superconvergent, ``O(h^2)``), complete linear
+fits. Order 2: the 2x2x2 Gauss points of every active element (the triquadratic field's
+superconvergent points), complete quadratic fits. Cut elements are sampled too, whether the
+point lies in the material or not (the FE stress is a polynomial on the whole cube); all
+samples weigh the same.
 
-Patches. A node's patch is the active elements sharing it, enlarged ring by ring while the
-fit is ill posed (fewer than 4 samples or all in one plane) or extrapolates too much; see
-:mod:`cgfem.fem._spr_kernels` for the exact rule (constant fallback when nothing is well
-posed within two enlargements; the unit sphere and torus of the tests never need it).
+Patches. A vertex's patch is the active elements sharing it, enlarged ring by ring while the
+fit is ill posed (too few samples or degenerate ones) or extrapolates too much; see
+:mod:`cgfem.fem._spr_kernels` for the exact rule (a constant fallback when nothing is well
+posed within two enlargements).
 
-Nodal values. ZZ's original averaging: ``sigma*_a`` is the mean, over the nodes ``b`` that
-share an element with ``a`` (``a`` included), of ``b``'s patch polynomial at ``x_a``. At
-boundary nodes this blends one-sided extrapolations with the fits of interior neighbours.
-
-Measured (tests/test_spr.py setting: interpolant of a smooth field on a unit sphere, grid
-offsets (0.13, 0.29, 0.41), h = 0.4 ... 0.05), error ``||sigma - sigma*||_L2`` at h = 0.05,
-observed order over the four levels and ZZ effectivity at h = 0.1 / 0.05:
-
-=================================  ========  =====  ===============
-variant                            error     order  effectivity
-=================================  ========  =====  ===============
-centres, averaged (this module)    0.0098    2.07   1.010 / 1.003
-centres, own-patch nodal value     0.0504    1.99   1.027 / 1.007
-2x2x2 Gauss, own-patch value       0.0506    1.95   1.032 / 1.010
-2x2x2 Gauss, averaged              0.0164    2.08   1.004 / 1.002
-=================================  ========  =====  ===============
-
-(raw FE stress: 0.240, order 1.03). A rotated torus and a second field rank them alike.
-Weighting the samples of cut elements by their material fraction (or its square root)
-changed the error by < 1 % and made it slightly worse at the finest levels, also with
-perturbed nodal values outside the body (a proxy of a poorly determined FE extension).
-Enlarging well-posed one-sided patches (Lebesgue guard 2 instead of 4) made the averaged
-recovery worse (0.0113): averaging already supplies the interior information.
+Nodal values. ZZ's averaging: ``sigma*_a`` is the mean, over the vertices ``b`` of the elements
+holding node ``a``, of ``b``'s patch polynomial at ``x_a``. At boundary nodes this blends
+one-sided extrapolations with the fits of interior neighbours. The choice of this variant
+among others (sampling points, own-patch values, weights of cut samples) is measured in
+docs/methods/elasticity.md.
 """
 
 from __future__ import annotations
@@ -50,6 +34,7 @@ import scipy.sparse as sp
 
 from cgfem.fem._spr_kernels import average_rows, patch_operators
 from cgfem.fem.space import ElementPoints, Space
+from cgfem.quadrature_rules import tensor_gauss
 
 #: patch enlargements tried before the constant fallback
 MAX_LEVEL = 2
@@ -61,10 +46,21 @@ MIN_EIG = 1e-6
 
 
 def sampling_points(space: Space) -> tuple[np.ndarray, np.ndarray]:
-    """Where the caller evaluates the FE stress for :func:`recover`: ``(slots (m,), xi (m, 3))``,
-    the centre ``xi = 0`` of every active element, in element order (``m = n_elements``)."""
+    """Where the caller evaluates the FE stress for :func:`recover`: ``(slots (m,), xi (m, 3))``
+    in element order. Order 1: the centre ``xi = 0`` of every active element (``m =
+    n_elements``); order 2: the 2x2x2 Gauss points ``xi = +-1/sqrt(3)`` of every active element
+    (``m = 8 n_elements``), where the triquadratic field's gradient is superconvergent."""
     n = space.n_elements
-    return np.arange(n, dtype=np.int64), np.zeros((n, 3))
+    if space.element.order == 1:
+        return np.arange(n, dtype=np.int64), np.zeros((n, 3))
+    local, _ = tensor_gauss(2, 3)
+    return np.repeat(np.arange(n, dtype=np.int64), local.shape[0]), np.tile(local, (n, 1))
+
+
+def fit_terms(space: Space) -> int:
+    """Terms of the patch polynomial: complete linear (4) for order 1, complete quadratic (10)
+    for order 2."""
+    return 4 if space.element.order == 1 else 10
 
 
 @dataclass(frozen=True)
@@ -90,7 +86,7 @@ def node_elements(space: Space) -> tuple[np.ndarray, np.ndarray]:
     flat = space.connectivity.ravel()
     order = np.argsort(flat, kind="stable")
     ptr = np.concatenate([[0], np.cumsum(np.bincount(flat, minlength=space.n_nodes))])
-    return ptr.astype(np.int64), (order // 8).astype(np.int64)
+    return ptr.astype(np.int64), (order // space.element.n_nodes).astype(np.int64)
 
 
 def build_recovery(space: Space) -> Recovery:
@@ -102,10 +98,12 @@ def build_recovery(space: Space) -> Recovery:
     conn = np.ascontiguousarray(space.connectivity, np.int64)
     coords = np.ascontiguousarray(space.coordinates, float)
     h = float(space.h)
+    vertex = np.zeros(space.n_nodes, bool)
+    vertex[space.connectivity[:, :8]] = True
     row_ptr, cols, coef, level, linear = patch_operators(
         conn, coords, node_ptr, elements, sample_ptr, x, h,
-        MAX_LEVEL, MAX_LEBESGUE, MIN_EIG)
-    indptr, indices, data = average_rows(row_ptr, cols, coef, linear, coords, h, conn,
+        MAX_LEVEL, MAX_LEBESGUE, MIN_EIG, fit_terms(space), vertex)
+    indptr, indices, data = average_rows(row_ptr, cols, coef, linear, vertex, coords, h, conn,
                                          node_ptr, elements, slots.size)
     matrix = sp.csr_matrix((data, indices, indptr), shape=(space.n_nodes, slots.size))
     matrix.sort_indices()

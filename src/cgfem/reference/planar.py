@@ -1,4 +1,5 @@
-"""Body-fitted plane-strain overkill reference of the planar example (DESIGN.md "The examples").
+"""Body-fitted plane-strain overkill reference of the planar example (docs/validation.md,
+"The planar example and its reference").
 
 Independent of cgFEM: our own Q9 elements (:mod:`cgfem.reference.elements`) on tensor
 meshes of both blocks (:mod:`cgfem.reference.mesh`) with the same y edges, so the interface

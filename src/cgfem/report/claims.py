@@ -1,4 +1,5 @@
-"""The paper's four claims (DESIGN.md "claims to reproduce"), decided from the result files.
+"""The paper's four claims, decided from the result files (docs/validation.md, "The paper's
+claims").
 
 1. The energy-norm error converges at the optimal rate for all three definitions (planar).
 2. ``facets`` on the coarsest chain2 mesh fails or is poor, while the NURBS definitions
@@ -8,9 +9,9 @@
 4. ``facets`` gives a lower peak von Mises stress than ``nurbs_fe`` in the middle link of chain3
    (the paper compares them on its meshes a and b, our levels 0 and 1).
 
-"The definitions" are those the results hold (``nurbs_fit`` is not run until it exists); the
-claim's text names them. "Converge" means status ``converged``: a run whose outer loop
-stopped at its cap (``outer_not_converged``) does not count as converged.
+"The definitions" are those the results hold; the claim's text names them. "Converge" means
+status ``converged``: a run whose outer loop stopped at its cap (``outer_not_converged``) does
+not count as converged.
 
 Every claim on the chains also names the distance of each run it uses to the body-fitted
 reference of its example (:mod:`cgfem.report.validation`), when the pipeline has one: the

@@ -21,6 +21,7 @@ import numpy as np
 from cgfem.case.load import load_case
 from cgfem.case.model import Case
 from cgfem.fem._element_kernels import point_gradients
+from cgfem.fem.element import hexahedron
 from cgfem.fem.space import Space
 from cgfem.geometry.builders import build_solid
 from cgfem.report.runs import BODY, DISPLACEMENT, Run, cell_values
@@ -81,14 +82,14 @@ def volume_strain(case: Case, run: Run, body_name: str, u: np.ndarray, nodes: np
     rebuilt for the run's level and surface; ``nodes`` (n_nodes, 3) are the VTU's node
     positions, checked against the rebuilt space's (they must be the same nodes)."""
     body = next(b for b in case.bodies if b.name == body_name)
-    embedding = embed_body(build_solid(body.geometry), body, run.level, run.surface)
-    space = Space.from_embedding(embedding)
+    embedding = embed_body(build_solid(body.geometry), body, run.level, run.surface, run.order)
+    space = Space.from_embedding(embedding, hexahedron(run.order))
     if space.coordinates.shape != nodes.shape or not np.allclose(space.coordinates, nodes,
                                                                  rtol=0.0, atol=1e-9 * space.h):
         raise ValueError(f"{run.folder}: the nodes of body {body_name} differ from the rebuilt "
                          "embedding's (case file changed since the run?)")
     points = space.volume_points(embedding)
-    grad = point_gradients(space.connectivity, np.ascontiguousarray(u, float).ravel(),
+    grad = point_gradients(*space.kernel_element, space.connectivity, np.ascontiguousarray(u, float).ravel(),
                            points.xi, points.offsets, space.h)
     return VolumeStrain(points.x, points.w, 0.5 * (grad + grad.transpose(0, 2, 1)))
 

@@ -1,5 +1,6 @@
-"""Reading the result folder of one run (DESIGN.md "Contracts"): the only module of the
-report package that knows file and field names, so a rename is a change here alone.
+"""Reading the result folder of one run (the files :mod:`cgfem.results` and
+:mod:`cgfem.contact.output` write): the only module of the report package that knows file
+and field names, so a rename is a change here alone.
 
 A run folder ``results/runs/{case}/L{level}_{surface}/`` holds ``summary.json``,
 ``step_NNN.vtu`` (hexahedra of all bodies), ``surface_NNN.vtu`` (boundary points at their
@@ -37,10 +38,12 @@ CONTACT_FIELDS = ("gap", PRESSURE, "p_N", ACTIVE, "normal", CONTACT_WEIGHT, CONT
 
 #: statuses of summary.json: every step solved with the outer loop below outer_tol; every
 #: step solved but the outer loop of at least one stopped at its cap (exit 1); a step failed
-#: after every cut-back, only the converged steps listed (exit 1)
+#: after every cut-back, only the converged steps listed (exit 1); stopped by a signal, the
+#: converged steps listed (exit 130 or 143)
 CONVERGED = "converged"
 OUTER_NOT_CONVERGED = "outer_not_converged"
 FAILED = "failed"
+INTERRUPTED = "interrupted"
 
 
 @dataclass(frozen=True)
@@ -68,6 +71,11 @@ class Run:
     @property
     def surface(self) -> str:
         return str(self.summary["surface"])
+
+    @property
+    def order(self) -> int:
+        """The element order of the run (1 for summaries written before orders existed)."""
+        return int(self.summary.get("order", 1))
 
     @property
     def status(self) -> str:
@@ -100,7 +108,8 @@ class Run:
         if self.outer_not_converged:
             return "outer loop not converged"
         reached = self.load_factors()[-1] if self.n_steps else 0.0
-        return f"failed beyond load {reached:.3g}"
+        what = "interrupted" if self.status == INTERRUPTED else "failed"
+        return f"{what} beyond load {reached:.3g}"
 
     @property
     def steps(self) -> list[dict]:

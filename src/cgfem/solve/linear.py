@@ -5,7 +5,10 @@
   pivots, threshold 0.01). Never ``spsolve``: with scikit-umfpack it silently uses UMFPACK.
 - ``pardiso``: MKL PARDISO through one :class:`pypardiso.PyPardisoSolver` per solver (freed
   with it); symmetric matrices as type -2 (upper triangle), 2-4x faster and half the memory
-  of the non-symmetric type 11 at 30k-100k DOFs.
+  of the non-symmetric type 11 at 30k-100k DOFs. Always in its conditional numerical
+  reproducibility mode (``iparm(34)``, the number of MKL threads) with MKL's dynamic thread
+  adjustment off: a factorization gives the same bits whatever the machine's load, where
+  the default mode's parallel factorization does not (:func:`mkl_threads`).
 - ``pyamg``: smoothed aggregation on 3x3 nodal blocks with the near-null space (rigid-body
   modes) as preconditioner of CG (symmetric) or GMRES(50), after the symmetric diagonal
   scaling ``D^-1/2 A D^-1/2`` (penalty rows, tiny cut cells); converged when the true
@@ -38,6 +41,7 @@ at all; larger ones, their constraints given, are solved on the bodies' dofs
 
 from __future__ import annotations
 
+import ctypes
 import functools
 import importlib
 import os
@@ -212,6 +216,23 @@ def _mkl_rt() -> str:
     return str(PyPardisoSolver().libmkl._name)
 
 
+@functools.cache
+def _mkl_library() -> ctypes.CDLL:
+    """MKL's runtime library, with its dynamic thread adjustment switched off (done once)."""
+    lib = ctypes.CDLL(_mkl_rt())
+    lib.MKL_Set_Dynamic(0)
+    return lib
+
+
+def mkl_threads() -> int | None:
+    """The number of threads MKL (PARDISO) uses, or None without pypardiso. PARDISO runs in
+    its reproducible mode with this many threads (``iparm(34)``), so the same thread count
+    gives bitwise the same factorization under any load."""
+    if "pardiso" not in available_backends():
+        return None
+    return int(_mkl_library().MKL_Get_Max_Threads())
+
+
 class _Pardiso(_DirectSolver):
     backend = "pardiso"
 
@@ -242,12 +263,20 @@ class _Pardiso(_DirectSolver):
             finally:
                 del os.environ["PYPARDISO_MKL_RT"]
         weakref.finalize(self, self._solver.free_memory, True)
+        # PARDISO's defaults for the type, then its conditional numerical reproducibility mode
+        # with the threads MKL uses (iparm(1) = 1 from pardisoinit: our iparm is read)
+        solver = self._solver
+        threads = mkl_threads() or 1
+        _mkl_library().pardisoinit(solver.pt.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)),
+                                   ctypes.byref(ctypes.c_int32(mtype)),
+                                   solver.iparm.ctypes.data_as(ctypes.POINTER(ctypes.c_int32)))
+        solver.iparm[33] = threads
         try:
             self._solver.factorize(M)
         except PyPardisoError as exc:
             raise LinearSolverError(f"pardiso: factorization failed: {exc}") from exc
         self.info.update(mtype=mtype, perturbed_pivots=int(self._solver.get_iparm(14)),
-                         factor_nnz=int(self._solver.get_iparm(18)))
+                         factor_nnz=int(self._solver.get_iparm(18)), threads=threads)
 
     def _apply(self, b: np.ndarray) -> np.ndarray:
         # PyPardisoSolver.solve reuses the factors while M equals its stored copy of M (an

@@ -1,0 +1,100 @@
+"""The hexahedral elements of the grid: trilinear (8 nodes) and triquadratic (27 nodes).
+
+An element is a tensor-product Lagrange hexahedron of order ``p`` on the cube of size ``h``
+of a grid element: its ``(p + 1)^3`` nodes sit at the local coordinates ``xi`` in
+``{-1, ..., 1}^3`` spaced ``2 / p`` apart, and the shape function of the node with tensor
+indices ``(i, j, k)`` is ``N = l_i(xi_0) l_j(xi_1) l_k(xi_2)`` with the 1D Lagrange
+polynomials ``l`` of order ``p`` on equally spaced points (:func:`~cgfem.fem._element_kernels.lagrange`).
+Physical derivatives on the axis-aligned cube are ``dN/dX = (2 / h) dN/dxi``.
+
+Node order: :data:`HEX8` takes the grid's corner order (:meth:`cgfem.embedding.grid.CartesianGrid.element_nodes`,
+VTK's hexahedron), :data:`HEX27` VTK's triquadratic hexahedron (corners, the 12 edge
+midpoints, the 6 face centres, the centre), so that ``step_NNN.vtu`` writes the
+connectivity as it is. The number of nodes per element, the quadrature degree an element
+needs and its cell type are read from the element everywhere; no other module assumes 8.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cgfem.fem import _element_kernels as kern
+
+__all__ = ["Hexahedron", "HEX8", "HEX27", "ORDERS", "hexahedron"]
+
+
+@dataclass(frozen=True)
+class Hexahedron:
+    """A Lagrange hexahedron of order 1 or 2.
+
+    order : polynomial order per variable
+    node_ijk : (n_nodes, 3) int64 tensor indices of the nodes, each in ``0..order``
+    cell_type : the meshio cell type of ``step_NNN.vtu`` (``hexahedron``, ``hexahedron27``)
+    """
+
+    order: int
+    node_ijk: np.ndarray = field(repr=False)
+    cell_type: str
+
+    @property
+    def n_nodes(self) -> int:
+        """Nodes per element, ``(order + 1)^3``."""
+        return int(self.node_ijk.shape[0])
+
+    @property
+    def n_dofs(self) -> int:
+        """Displacement dofs per element, ``3 n_nodes``."""
+        return 3 * self.n_nodes
+
+    @property
+    def degree(self) -> int:
+        """The polynomial degree per variable its stiffness and mass integrands reach,
+        ``2 order``: the degree the quadrature of a cut element must integrate exactly."""
+        return 2 * self.order
+
+    @property
+    def gauss_points(self) -> int:
+        """Gauss points per direction that integrate :attr:`degree` exactly on a whole cube."""
+        return self.order + 1
+
+    @property
+    def node_xi(self) -> np.ndarray:
+        """(n_nodes, 3) local coordinates of the nodes in ``[-1, 1]^3``."""
+        return -1.0 + (2.0 / self.order) * self.node_ijk
+
+    @property
+    def vertices(self) -> np.ndarray:
+        """(8,) the element's corner nodes (the first eight), in the grid's corner order."""
+        return np.arange(8)
+
+    def tabulate(self, xi: np.ndarray, h: float, second: bool = False
+                 ) -> tuple[np.ndarray, np.ndarray] | tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Shape functions at local coordinates ``xi`` (n, 3) of a cube of size ``h``.
+
+        Returns
+        -------
+        N : (n, n_nodes)
+        dN : (n, n_nodes, 3), ``dN[p, a, J] = dN_a/dX_J``
+        d2N : (n, n_nodes, 3, 3), ``d2N[p, a, J, K] = d2N_a/dX_J dX_K`` (if ``second``)
+        """
+        xi = np.ascontiguousarray(np.asarray(xi, float).reshape(-1, 3))
+        N, dN, d2N = kern.basis_at(self.node_ijk, self.order, xi, float(h), second)
+        return (N, dN, d2N) if second else (N, dN)
+
+
+#: the trilinear hexahedron (H8), the paper's element
+HEX8 = Hexahedron(1, kern.HEX8_IJK, "hexahedron")
+#: the triquadratic Lagrange hexahedron (27 nodes, VTK's node order)
+HEX27 = Hexahedron(2, kern.HEX27_IJK, "hexahedron27")
+#: the element of each order ``cgfem run --order`` accepts
+ORDERS = {1: HEX8, 2: HEX27}
+
+
+def hexahedron(order: int) -> Hexahedron:
+    """The element of ``order`` (1 or 2); ``ValueError`` otherwise."""
+    try:
+        return ORDERS[int(order)]
+    except (KeyError, ValueError, TypeError):
+        raise ValueError(f"element order must be one of {sorted(ORDERS)}, got {order!r}") from None

@@ -1,0 +1,112 @@
+"""The paper's planar example (config/cases/planar.yaml) with contact: the lower block is held
+vertically by contact alone (its supports constrain x and y only), so the total contact force
+equals the resultant of the lateral tractions t_z = 10e11 (0.01 - z) z as the discretization
+integrates them (the dead-load vector of the lower body); on the exact surface (nurbs_fe)
+that is 2 * 1e12 * 0.01^3 / 6 * 0.0025 N. Facets integrate the tractions on the marching-cubes
+surface, whose chamfered edges change the resultant."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from cgfem.case import load_case
+from cgfem.run import build_models, run_case
+from tests.support.paths import CASES
+
+#: every test here solves a whole problem
+pytestmark = pytest.mark.slow
+
+
+CASE = CASES / "planar.yaml"
+RESULTANT = 2.0 * 1e12 * 0.01 ** 3 / 6.0 * 0.0025
+
+
+@pytest.mark.parametrize("surface", ["nurbs_fe", "facets"])
+@pytest.mark.parametrize("level", [0, 1, 2])
+def test_contact_force_balances_the_tractions(tmp_path, surface, level):
+    case = load_case(CASE)
+    status = run_case(case, level, surface, tmp_path)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert status.status == "converged"
+    step = summary["steps"][-1]
+    force = np.asarray(step["contact"]["force"])
+    lower = build_models(case, level, surface, lambda m: None)[0][0]
+    load_z = lower.load[2::3].sum()
+    assert abs(force[2] + load_z) <= 1e-8 * RESULTANT
+    if surface == "nurbs_fe":
+        assert abs(load_z - RESULTANT) <= 1e-9 * RESULTANT
+    # frictionless: the force follows the current normals, tilted by the strain (~1e-4)
+    assert np.all(np.abs(force[:2]) <= 1e-3 * RESULTANT)
+    # the interface stays closed: most slave points active, all compressive
+    assert step["contact"]["active_points"] > 0
+    # about 4e7 Pa along the interface (the reference solution: 2.8e7 to 4.5e7 Pa); facets
+    # peak at their chamfered edges
+    assert 1e7 < step["contact"]["max_pressure"] < (2e8 if surface == "nurbs_fe" else 1e9)
+    # the residual with every hit on the continuous surface: Newton's own last one unless an
+    # active hit lies on the extension of a kept element or triangle
+    last = step["pass_residuals"][-1][-1] / step["newton_reference"]
+    assert step["contact"]["continuous_residual"] <= case.solver.newton_tol
+    if step["contact"]["extended_hits"] == 0:
+        assert step["contact"]["continuous_residual"] == pytest.approx(last, rel=1e-3, abs=1e-11)
+
+
+def test_failure_message_says_what_contact_was_doing(tmp_path):
+    """A run stopped by Newton's cap names the contact set's state at its last iterate: the
+    active points and what changed since the iterate before (here planar at level 0 with one
+    Newton iteration allowed: the closed interface stays active, nothing switches)."""
+    import dataclasses
+    case = load_case(CASE)
+    case = dataclasses.replace(case, solver=dataclasses.replace(case.solver, max_newton=1, max_cutbacks=0))
+    status = run_case(case, 0, "nurbs_fe", tmp_path)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert status.status == "failed" and summary["status"] == "failed"
+    message = summary["message"]
+    assert "Newton stopped on max_iterations" in message
+    import re
+    active = int(re.search(r"; (\d+) active contact points", message).group(1))
+    assert active > 100
+    assert "at the last iteration 0 switched status and 0 active ones moved" in message
+
+
+def test_recorded_changes_count_switches_and_moves():
+    """The pair's record between two linearization points: status switches, and active
+    points whose hit moved to another master triangle (facets) or element (NURBS+FE)."""
+    from types import SimpleNamespace
+    from cgfem.contact.assembly import ContactSet
+    from cgfem.contact.pair import ContactPair, ContactState
+    from cgfem.contact.surfaces import RayHits
+
+    def hits(piece, slot):
+        n = len(piece)
+        return RayHits(np.ones(n, bool), np.asarray(piece), np.zeros((n, 2)), np.zeros(n),
+                       None if slot is None else np.asarray(slot))
+    pair = SimpleNamespace(state=ContactState(np.zeros(5)))
+    ContactPair._record(pair, hits([0, 0, 1, 1, 2], [3, 4, 5, 6, 7]), np.array([1, 1, 1, 0, 0], bool), None)
+    ContactPair._record(pair, hits([0, 0, 1, 1, 2], [3, 9, 5, 6, 8]), np.array([1, 1, 0, 1, 0], bool), None)
+    # points 2 and 3 switched; point 1 stayed active on another element (point 4 is inactive)
+    assert (pair.state.last_switched, pair.state.last_moved) == (2, 1)
+    facets = SimpleNamespace(state=ContactState(np.zeros(3)))
+    ContactPair._record(facets, hits([4, 5, 6], None), np.ones(3, bool), None)
+    ContactPair._record(facets, hits([4, 7, 8], None), np.ones(3, bool), None)
+    assert (facets.state.last_switched, facets.state.last_moved) == (0, 2)
+    text = ContactSet.changes(SimpleNamespace(pairs=[pair, facets]))
+    assert text == ("6 active contact points; at the last iteration 2 switched status and 3 active ones moved "
+                    "to another master triangle or element")
+
+
+def test_floating_body_is_reported_with_a_vanishing_stabilizing_force(tmp_path):
+    """The lower block is held along z by contact alone: its supports (y on zmin, x on xmin
+    and xmax) leave the z translation and the rotation about the x axis through zmin free.
+    The summary names it, with the force its tangent shift put into the last Newton step
+    (nonzero: the shift acted; measured 3.3e-15 N) and the force its equations leave
+    unbalanced, both far below the 833 N contact force it carries."""
+    case = load_case(CASE)
+    assert run_case(case, 0, "nurbs_fe", tmp_path).status == "converged"
+    contact = json.loads((tmp_path / "summary.json").read_text())["steps"][-1]["contact"]
+    floating = contact["floating"]
+    assert list(floating) == ["lower"] and floating["lower"]["free_modes"] == 2
+    assert 0.0 < floating["lower"]["stabilizing_force"] <= 1e-10 * np.linalg.norm(contact["force"])
+    assert floating["lower"]["residual"] <= 1e-8 * np.linalg.norm(contact["force"])

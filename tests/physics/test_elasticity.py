@@ -1,0 +1,243 @@
+"""Elasticity on cut grids: assembly, patch test, Neo-Hookean tangent and closed forms."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from cgfem.embedding.quadrature import embed, grid_for
+from cgfem.fem.assembly import build_pattern
+from cgfem.fem.elasticity import reference_matrix
+from cgfem.fem.materials import uniaxial_stretch_neo_hookean
+from cgfem.fem.space import Space
+from cgfem.geometry.builders import build_solid
+from cgfem.geometry.specs import SphereSpec
+from cgfem.run import build_models
+from cgfem.solve.linear import rigid_body_modes
+from cgfem.solve.newton import observed_order
+from cgfem.solve.static import System, solve_static
+from tests.support.elasticity_cases import box_case, uniform_stress_case
+
+
+def _solve(case, level=0, surface="nurbs_fe"):
+    models, _ = build_models(case, level, surface, lambda m: None)
+    system = System(models)
+    return system, solve_static(system, case.steps, case.solver)
+
+
+@pytest.fixture(scope="module")
+def sphere_space():
+    solid = build_solid(SphereSpec(center=(0.0, 0.0, 0.0), radius=1.0))
+    emb = embed(solid, grid_for(solid, 0.5, 0, (0.13, 0.29, 0.41)))
+    return emb, Space.from_embedding(emb)
+
+
+def test_pattern_positions_assemble_like_coo(sphere_space):
+    _, space = sphere_space
+    pattern = build_pattern(space)
+    rng = np.random.default_rng(1)
+    ke = rng.standard_normal((space.n_elements, 24, 24))
+    data = pattern.zeros()
+    np.add.at(data, pattern.scatter.ravel(), ke.ravel())
+    dofs = space.element_dofs
+    rows = np.broadcast_to(dofs[:, :, None], ke.shape).ravel()
+    cols = np.broadcast_to(dofs[:, None, :], ke.shape).ravel()
+    reference = sp.coo_matrix((ke.ravel(), (rows, cols)), shape=(space.n_dofs,) * 2).tocsr()
+    assert abs(pattern.matrix(data) - reference).max() < 1e-13
+    # colours: no two elements of one colour share a node
+    for elements in pattern.colours:
+        nodes = space.connectivity[elements].ravel()
+        assert np.unique(nodes).size == nodes.size
+
+
+def test_reference_matrix_is_symmetric_with_rigid_modes_as_kernel():
+    from cgfem.fem._material_kernels import LINEAR_ELASTIC, tangent_batch
+
+    A = tangent_batch(LINEAR_ELASTIC, np.zeros((1, 3, 3)), 0.7, 1.3)[2][0]
+    h = 0.37
+    ke = reference_matrix(A, h)
+    from cgfem.fem.space import NODE_XI
+    modes = rigid_body_modes(0.5 * h * NODE_XI)
+    assert np.abs(ke - ke.T).max() < 1e-14 * np.abs(ke).max()
+    assert np.abs(ke @ modes).max() < 1e-13 * np.abs(ke).max()
+    eig = np.linalg.eigvalsh(ke)
+    assert np.sum(eig > 1e-10 * eig.max()) == 18          # 24 dofs - 6 rigid modes
+
+
+def test_stiffness_energy_of_linear_fields_is_exact_on_cut_sphere():
+    """u^T K u = V sigma:eps for u = G x: the cut-cell rule is exact for the integrand and
+    the ghost penalty vanishes on linear fields."""
+    case, _ = uniform_stress_case(np.diag([1.0, 2.0, 3.0]), 1.0, 0.3, (0.1, 0.2, 0.3))
+    models, measures = build_models(case, 1, "nurbs_fe", lambda m: None)
+    model = models[0]
+    assert model.ghost.nnz > 0
+    rng = np.random.default_rng(2)
+    G = rng.standard_normal((3, 3))
+    u = (model.space.coordinates @ G.T).ravel()
+    r = np.zeros(model.n_dofs)
+    model.elasticity.add(u, r, None)
+    el = model.elasticity
+    eps = 0.5 * (G + G.T)
+    sig = el.lam * np.trace(eps) * np.eye(3) + 2 * el.mu * eps
+    exact = measures["b"]["brep_volume"] * np.sum(sig * eps)
+    assert abs(u @ r - exact) < 1e-10 * abs(exact)
+    assert np.abs(model.ghost @ u).max() < 1e-12 * np.abs(r).max()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [0, 1])
+def test_patch_test_reproduces_uniform_stress(seed):
+    rng = np.random.default_rng(seed)
+    sigma = rng.standard_normal((3, 3)) * 1e6
+    sigma = 0.5 * (sigma + sigma.T)
+    case, eps = uniform_stress_case(sigma, 2.0e9, 0.3, rng.uniform(0, 1, 3))
+    system, result = _solve(case)
+    assert result.status == "converged"
+    model, step = system.bodies[0], result.steps[-1]
+    u = step.u[0].reshape(-1, 3)
+    exact = model.space.coordinates @ eps.T
+    assert np.abs(u - exact).max() < 1e-8 * np.abs(exact).max()
+    assert np.abs(step.recovered[0] - sigma).max() < 1e-8 * np.abs(sigma).max()
+    stress_h = model.elasticity.stress(step.u[0])
+    assert np.abs(stress_h - sigma).max() < 1e-8 * np.abs(sigma).max()
+    # reaction on the three constrained faces: -(sigma n) integrated = -sum of sigma e_a
+    reaction = model.reactions(step.u[0], 1.0, step.frozen_stress[0])["b/xmin+ymin+zmin"]
+    assert np.allclose(reaction, -sigma.sum(axis=1), rtol=0, atol=1e-8 * np.abs(sigma).max())
+    assert step.outer_passes < 20
+
+
+def _neo_hookean_box(boundary, steps=1, **kw):
+    return box_case(boundary, material={"model": "neo_hookean", "E": 1.0e6, "nu": 0.3},
+                    kinematics="finite", steps=steps, **kw)
+
+
+def test_neo_hookean_tangent_matches_finite_differences():
+    case = _neo_hookean_box([{"patches": ["xmin"], "type": "displacement",
+                              "components": {"x": "0.1*y", "y": "0.05*z*z", "z": "0"}},
+                             {"patches": ["zmax"], "type": "traction", "value": ["1e4", "0", "-2e4*x"]}],
+                            offset=(0.31, 0.77, 0.52))
+    models, _ = build_models(case, 0, "nurbs_fe", lambda m: None)
+    model = models[0]
+    rng = np.random.default_rng(3)
+    x = model.space.coordinates
+    stress = rng.standard_normal((model.space.n_nodes, 3, 3)) * 1e4
+    for _ in range(3):
+        G = rng.standard_normal((3, 3)) * 0.15
+        u = (x @ G.T).ravel() + 0.02 * rng.standard_normal(model.n_dofs)
+        r, K = model.assemble(u, 0.7, stress)
+        d = rng.standard_normal(model.n_dofs)
+        eps = 1e-6
+        fd = (model.assemble(u + eps * d, 0.7, stress, False)[0]
+              - model.assemble(u - eps * d, 0.7, stress, False)[0]) / (2 * eps)
+        assert np.linalg.norm(K @ d - fd) < 1e-6 * np.linalg.norm(fd)
+    assert abs(K - K.T).max() < 1e-10 * abs(K).max()
+
+
+@pytest.mark.slow
+def test_uniaxial_stretch_matches_closed_form_and_newton_is_quadratic():
+    E, nu, stretch = 1.0e6, 0.3, 1.5
+    case = _neo_hookean_box([
+        {"patches": ["xmin"], "type": "displacement", "components": {"x": "0"}},
+        {"patches": ["ymin"], "type": "displacement", "components": {"y": "0"}},
+        {"patches": ["zmin"], "type": "displacement", "components": {"z": "0"}},
+        {"patches": ["xmax"], "type": "displacement", "components": {"x": repr(stretch - 1.0)}}],
+        steps=1, solver={"newton_tol": 1e-12, "outer_tol": 1e-11})
+    system, result = _solve(case)
+    assert result.status == "converged"
+    model, step = system.bodies[0], result.steps[-1]
+    lateral, nominal = uniaxial_stretch_neo_hookean(stretch, E, nu)
+    reaction = model.reactions(step.u[0], 1.0, step.frozen_stress[0])["b/xmax"]
+    assert abs(reaction[0] - nominal * 1.0) < 1e-6 * nominal      # reference area 1 m^2
+    u = step.u[0].reshape(-1, 3)
+    x = model.space.coordinates
+    expected = x * np.array([stretch - 1.0, lateral - 1.0, lateral - 1.0])
+    assert np.abs(u - expected).max() < 1e-10        # measured 4e-14
+    # quadratic convergence: the first pass of the step starts far from the solution
+    first = result.steps[-1].newton_residuals[0]
+    assert len(first) >= 5
+    assert observed_order(first) >= 1.8
+
+
+@pytest.mark.slow
+def test_rigid_rotation_imposed_weakly_is_stress_free():
+    E = 1.0e6
+    # u = (R - I) x for a 90 degree rotation about z through the origin
+    case = _neo_hookean_box([{"patches": ["xmin", "ymin"], "type": "displacement",
+                              "components": {"x": "-y - x", "y": "x - y", "z": "0"}}],
+                            steps=6, solver={"newton_tol": 1e-12, "outer_tol": 1e-12})
+    system, result = _solve(case)
+    assert result.status == "converged"
+    model, step = system.bodies[0], result.steps[-1]
+    P = model.elasticity.stress(step.u[0])
+    assert np.abs(P).max() < 1e-8 * E
+    assert np.abs(step.recovered[0]).max() < 1e-8 * E
+
+
+@pytest.mark.slow
+def test_reactions_balance_body_force_and_tractions_exactly():
+    """Translation invariance of the bulk and ghost terms: the support reaction equals minus
+    the resultant of the dead loads, whatever the recovered stress."""
+    case = box_case([{"patches": ["zmin"], "type": "displacement", "components": {"x": "0", "y": "0", "z": "0"}},
+                     {"patches": ["zmax"], "type": "traction", "value": ["1e4*x", "0", "-2e4*y*y"]}],
+                    material={"model": "linear_elastic", "E": 1.0e9, "nu": 0.3}, offset=(0.7, 0.1, 0.45),
+                    solver={"outer_passes": 3})
+    import dataclasses
+
+    from cgfem.case.expressions import as_vector_expression
+    body = dataclasses.replace(case.bodies[0], body_force=as_vector_expression(["0", "3e3", "-7.8e4*(1+z)"], "bf"))
+    case = dataclasses.replace(case, bodies=(body,))
+    system, result = _solve(case)
+    step = result.steps[-1]
+    reaction = system.bodies[0].reactions(step.u[0], 1.0, step.frozen_stress[0])["b/zmin"]
+    # resultants over the unit box: body force (0, 3e3, -7.8e4 * 1.5), traction (0.5e4, 0, -2e4/3)
+    loads = np.array([0.5e4, 3e3, -7.8e4 * 1.5 - 2e4 / 3])
+    assert np.allclose(reaction, -loads, rtol=0, atol=1e-9 * np.abs(loads).max())
+
+
+def test_reference_matrix_equals_the_independent_voigt_brick():
+    """Our tensor-form element kernel against the Voigt B^T D B brick of the solver fixture."""
+    from tests.support import elasticity_fixture as fx
+    from cgfem.fem._material_kernels import LINEAR_ELASTIC, tangent_batch
+
+    E, nu, h = 2.5, 0.27, 0.4
+    lam, mu = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+    A = tangent_batch(LINEAR_ELASTIC, np.zeros((1, 3, 3)), mu, lam)[2][0]
+    ke = reference_matrix(A, h)
+    assert np.abs(ke - fx.brick_stiffness(h, E, nu)).max() < 1e-14 * np.abs(ke).max()
+
+
+def test_cut_back_reaches_the_step_in_equal_sub_steps(monkeypatch):
+    """An increment that fails is halved until it succeeds; the rest of the step is then
+    taken in sub-steps of that size (not ever smaller ones)."""
+    import cgfem.solve.static as static
+    from cgfem.case.model import SolverOptions
+
+    class OneDof:
+        n_dofs, symmetric, indefinite, bodies = 1, True, False, [None]
+
+        def split(self, u):
+            return [u]
+
+        def saddle(self):
+            return None
+
+        def near_null(self):
+            return np.ones((1, 1))
+
+    taken = []
+
+    def increment(system, solver, u, stress, t, options, log):
+        if t - (taken[-1] if taken else 0.0) > 0.3:
+            return "Newton stopped"           # too large an increment: Newton fails
+        taken.append(t)
+        return static.Increment(u, stress, stress, [[1.0, 0.0]], [0.0], True)
+
+    monkeypatch.setattr(static, "_solve_increment", increment)
+    result = static.solve_static(OneDof(), 1, SolverOptions(max_cutbacks=2))
+    assert result.status == "converged"
+    assert taken == pytest.approx([0.25, 0.5, 0.75, 1.0])
+    taken.clear()
+    result = static.solve_static(OneDof(), 1, SolverOptions(max_cutbacks=1))
+    assert result.status == "failed" and taken == []
+    assert result.message.endswith("after 1 cut-backs (last attempt: Newton stopped)")

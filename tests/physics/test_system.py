@@ -1,0 +1,195 @@
+"""The solver's System with two bodies (no contact): block-diagonal tangent whose blocks are
+the one-body tangents, a residual that splits, and a two-body solve equal to the two
+one-body solves; in finite strain the tangent is the derivative of the residual."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from cgfem.case.load import parse_case
+from cgfem.run import build_models
+from cgfem.solve.static import System, solve_static
+
+
+def _pair(model: str, E_box: float, E_sphere: float):
+    """A box clamped on xmin and pulled by a traction on xmax, and a sphere whose whole
+    surface is held at a prescribed field, loaded by a body force; different materials."""
+    data = {
+        "name": "pair", "kinematics": "small" if model == "linear_elastic" else "finite", "steps": 1,
+        "bodies": {
+            "box": {"geometry": {"builder": "box", "min": [0, 0, 0], "max": [1.0, 0.6, 0.5]},
+                    "material": {"model": model, "E": E_box, "nu": 0.3},
+                    "grid": {"h0": 0.25, "offset": [0.13, 0.29, 0.41]}},
+            "ball": {"geometry": {"builder": "sphere", "center": [2.0, 0.1, 0.2], "radius": 0.45},
+                     "material": {"model": model, "E": E_sphere, "nu": 0.42},
+                     "grid": {"h0": 0.2, "offset": [0.71, 0.37, 0.53]},
+                     "body_force": ["0", "0", f"{-0.3 * E_sphere}*(1 + x)"]}},
+        "boundary": [
+            {"body": "box", "patches": ["xmin"], "type": "displacement", "components": {"x": 0, "y": 0, "z": 0}},
+            {"body": "box", "patches": ["xmax"], "type": "traction",
+             "value": [f"{0.05 * E_box}", f"{0.01 * E_box}*z", "0"]},
+            {"body": "ball", "patches": ["surface"], "type": "displacement",
+             "components": {"x": "0.01*y", "y": "-0.02*(z - 0.2)", "z": "0.005"}}],
+        "solver": {"linear": "superlu", "outer_passes": 3, "outer_tol": 1e-300}}
+    case = parse_case(data, Path("."))
+    return case, build_models(case, 0, "nurbs_fe", lambda message: None)[0]
+
+
+@pytest.fixture(scope="module")
+def small_pair():
+    return _pair("linear_elastic", 2.0e9, 5.0e8)
+
+
+def _split_check(system: System, singles: list[System], u: np.ndarray, t: float, frozen: list):
+    r, K = system.assemble(u, t, frozen, True)
+    parts = [s.assemble(ub, t, [f], True) for s, ub, f in zip(singles, system.split(u), frozen)]
+    # the residual splits, body by body, to the last bit
+    assert np.array_equal(r, np.concatenate([p[0] for p in parts]))
+    # the tangent is block diagonal and each block is the one-body tangent
+    K = sp.csr_matrix(K)
+    o = system.offsets
+    for i, (a, b) in enumerate(zip(o[:-1], o[1:])):
+        block = K[a:b][:, a:b]
+        assert abs(block - parts[i][1]).max() == 0.0
+        assert K[a:b].nnz == block.nnz                               # nothing outside the block
+    return r, K
+
+
+@pytest.mark.slow
+def test_small_strain_pair_is_two_independent_bodies(small_pair):
+    case, (box, ball) = small_pair
+    system, singles = System([box, ball]), [System([box]), System([ball])]
+    assert system.n_dofs == box.n_dofs + ball.n_dofs and box.n_dofs != ball.n_dofs
+    rng = np.random.default_rng(4)
+    u = 1e-3 * rng.normal(size=system.n_dofs)
+    frozen = system.recover(u)
+    for stress in ([None, None], frozen):
+        _split_check(system, singles, u, 0.7, stress)
+
+    # the two-body solution of a linear outer pass is the pair of one-body solutions
+    def solve(sys_, stress):
+        r, K = sys_.assemble(np.zeros(sys_.n_dofs), 1.0, stress, True)
+        return spla.spsolve(sp.csc_matrix(K), -r)
+
+    u2 = solve(system, [None, None])
+    u_box, u_ball = solve(singles[0], [None]), solve(singles[1], [None])
+    scale = np.abs(u2).max()
+    assert scale > 1e-4                                              # the loads do something
+    assert np.abs(u2 - np.concatenate([u_box, u_ball])).max() <= 1e-12 * scale
+    # and the whole static solver (3 outer passes with the recovered stress) agrees
+    both = solve_static(system, 1, case.solver).steps[-1].u
+    one = [solve_static(s, 1, case.solver).steps[-1].u[0] for s in singles]
+    for a, b in zip(both, one):
+        assert np.abs(a - b).max() <= 1e-11 * np.abs(b).max()
+    # the box's equilibrium: its support carries the traction resultant over the 0.6 x 0.5
+    # face, (0.05 E, 0.01 E int z) = (3e7, 1.5e6) N
+    step = solve_static(singles[0], 1, case.solver).steps[-1]
+    reaction = box.reactions(step.u[0], 1.0, step.frozen_stress[0])["box/xmin"]
+    assert np.abs(reaction[:2] + [3.0e7, 1.5e6]).max() <= 1e-8 * 3.0e7
+
+
+def test_finite_strain_pair_tangent_is_the_derivative_of_the_residual():
+    _, (box, ball) = _pair("neo_hookean", 3.0e6, 1.0e6)
+    system = System([box, ball])
+    rng = np.random.default_rng(8)
+    # a finite deformation: a shear and stretch of each body plus noise
+    u = []
+    for body, G in zip((box, ball), ([[0.1, 0.15, 0.0], [0.0, -0.05, 0.0], [0.05, 0.0, 0.08]],
+                                     [[-0.1, 0.0, 0.12], [0.06, 0.1, 0.0], [0.0, 0.0, 0.05]])):
+        x = body.space.coordinates
+        u.append((x @ np.array(G).T + 0.01 * rng.normal(size=x.shape)).reshape(-1))
+    u = np.concatenate(u)
+    frozen = system.recover(u)
+    r, K = _split_check(system, [System([box]), System([ball])], u, 0.8, frozen)
+    v = rng.normal(size=system.n_dofs)
+    v /= np.abs(v).max()
+    eps = 1e-6
+    fd = (system.assemble(u + eps * v, 0.8, frozen, False)[0]
+          - system.assemble(u - eps * v, 0.8, frozen, False)[0]) / (2 * eps)
+    Kv = K @ v
+    assert np.linalg.norm(fd - Kv) <= 1e-8 * np.linalg.norm(Kv)   # measured 1e-10
+    # the check can fail: the tangent of the wrong material point is far off
+    assert np.linalg.norm(fd - System([box, ball]).assemble(0 * u, 0.8, frozen, True)[1] @ v) \
+        > 1e-2 * np.linalg.norm(Kv)
+
+
+@pytest.mark.parametrize("components, free", [({"x": 0, "y": 0, "z": 0}, 0), ({"x": 0, "y": 0}, 1), (None, 6)])
+def test_free_rigid_modes_of_a_body(components, free):
+    """A box on face xmin: clamped holds every rigid motion; held along x and y only it
+    keeps the z translation free (every rotation moves the face along x or y); without
+    conditions all six are free: the bodies contact must hold (tangent shift)."""
+    data = {"name": "free", "kinematics": "small", "steps": 1,
+            "bodies": {"box": {"geometry": {"builder": "box", "min": [0, 0, 0], "max": [1.0, 0.6, 0.5]},
+                               "material": {"model": "linear_elastic", "E": 1e9, "nu": 0.3},
+                               "grid": {"h0": 0.25, "offset": [0.13, 0.29, 0.41]}}},
+            "boundary": [] if components is None else
+            [{"body": "box", "patches": ["xmin"], "type": "displacement", "components": components}]}
+    case = parse_case(data, Path("."))
+    body = build_models(case, 0, "nurbs_fe", lambda message: None)[0][0]
+    _, K = body.assemble(np.zeros(body.n_dofs), 1.0, None, True)
+    assert System([body]).free_rigid_modes(0, sp.csr_matrix(K)) == free
+
+
+def test_fading_shift_restores_fast_convergence_on_a_soft_mode():
+    """A soft mode of stiffness k under a tangent shift s converges at the rate s / (k + s)
+    per Newton iteration: with s = 10 k (chain3's middle link at level 2 had k / s ~ 0.09)
+    a fixed shift needs over 250 iterations to 1e-12; the shift scaled by shift_factor fades
+    with the residual and gets there in 18 (the floor SHIFT_FLOOR sets the final rate, 1e-3)."""
+    from cgfem.solve.newton import newton
+    from cgfem.solve.static import SHIFT_FLOOR, shift_factor
+    assert shift_factor(5.0, 5.0) == 1.0 and shift_factor(1.0, 0.0) == 1.0
+    assert shift_factor(1e-3, 1.0) == pytest.approx(1e-3) and shift_factor(1e-9, 1.0) == SHIFT_FLOOR
+    k, s, f = 1.0, 10.0, 1.0
+
+    def solve(fading):
+        largest = [0.0]
+
+        def assemble(u, tangent):
+            r = np.array([k * u[0] - f])
+            norm = float(np.abs(r[0]))
+            largest[0] = max(largest[0], norm)
+            factor = shift_factor(norm, largest[0]) if fading else 1.0
+            return r, np.array([[k + factor * s]])
+        return newton(assemble, np.zeros(1), lambda K, b: np.linalg.solve(K, b), tol=1e-12, reference=1.0,
+                      max_iter=400)
+    fixed, fading = solve(False), solve(True)
+    assert fixed.converged and len(fixed.residuals) - 1 > 250
+    assert fading.converged and len(fading.residuals) - 1 < 25           # 18 measured
+    np.testing.assert_allclose(fading.u, [f / k], rtol=1e-12)
+
+
+def test_step_limit_of_a_floating_body_adapts_its_shift():
+    """A Newton step moving a body held by contact alone by 10 h is scaled to 1 h
+    (FLOATING_STEP), and the body's tangent shift is raised 10-fold for the next iterations
+    (a Levenberg-Marquardt damping of its soft rigid motions); steps within the limit are
+    kept as they are and lower the damping by DAMPING_DECAY, down to 1; near convergence
+    (residual below DAMPING_ABOVE of the increment's largest) a limited step lowers it too."""
+    from cgfem.solve.static import DAMPING_ABOVE, DAMPING_DECAY, FLOATING_STEP
+    data = {"name": "free", "kinematics": "small", "steps": 1,
+            "bodies": {"box": {"geometry": {"builder": "box", "min": [0, 0, 0], "max": [1.0, 0.6, 0.5]},
+                               "material": {"model": "linear_elastic", "E": 1e9, "nu": 0.3},
+                               "grid": {"h0": 0.25, "offset": [0.13, 0.29, 0.41]}}},
+            "boundary": []}
+    body = build_models(parse_case(data, Path(".")), 0, "nurbs_fe", lambda message: None)[0][0]
+    system = System([body])
+    system.floating = [0]
+    h = body.space.h
+    du = np.zeros(body.n_dofs)
+    du[0::3] = 10.0 * FLOATING_STEP * h                      # a rigid x translation of 10 h
+    limited = system.limit_step(du)
+    np.testing.assert_allclose(limited, 0.1 * du, rtol=1e-14)
+    assert system.damping == pytest.approx(10.0)
+    small = 0.5 * FLOATING_STEP * h * np.ones(body.n_dofs)
+    assert system.limit_step(small) is small
+    assert system.damping == pytest.approx(10.0 * DAMPING_DECAY)
+    for _ in range(5):
+        system.limit_step(small)
+    assert system.damping == 1.0
+    system.damping, system._fading = 8.0, 0.5 * DAMPING_ABOVE
+    np.testing.assert_allclose(system.limit_step(du), 0.1 * du, rtol=1e-14)
+    assert system.damping == pytest.approx(8.0 * DAMPING_DECAY)

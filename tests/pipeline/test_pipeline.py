@@ -1,0 +1,105 @@
+"""The Snakemake pipeline: the smoke and the full configuration plan the expected jobs, and
+`snakemake --lint` finds nothing. Run in a copy of the workflow files, so results already in
+the working tree do not change the plan."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+from tests.support.paths import REPO
+
+pytest.importorskip("snakemake")
+
+FIGURES = ["fig09", "fig10", "fig13", "fig14", "fig15", "fig17", "newton", "timings", "geometry"]
+
+
+@pytest.fixture(scope="module")
+def workdir(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("pipeline")
+    shutil.copy(REPO / "Snakefile", root)
+    shutil.copytree(REPO / "workflow", root / "workflow")
+    shutil.copytree(REPO / "config", root / "config")
+    return root
+
+
+def snakemake(root: Path, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "snakemake", *args], cwd=root,
+                          capture_output=True, text=True, timeout=300)
+
+
+def planned_jobs(root: Path, *args: str) -> dict[str, int]:
+    done = snakemake(root, "-n", "--quiet", "rules", *args)
+    assert done.returncode == 0, done.stderr + done.stdout
+    text = done.stdout + done.stderr
+    table = text[text.index("Job stats"):]
+    return {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)$", table, re.M) if m[1] != "total"}
+
+
+def expected_runs(config: dict) -> int:
+    return sum(len(e["levels"]) for e in config["examples"].values()) * len(config["surfaces"])
+
+
+def test_smoke_plan_has_every_rule_once_per_job(workdir):
+    config = yaml.safe_load((REPO / "config" / "smoke.yaml").read_text())
+    jobs = planned_jobs(workdir, "--configfile", "config/smoke.yaml")
+    n_planar = len(config["examples"]["planar"]["levels"]) * len(config["surfaces"])
+    assert jobs == {"all": 1, "check_case": 4, "run_case": expected_runs(config), "planar_reference": 1,
+                    "planar_errors": n_planar, "claims": 1, **{f: 1 for f in FIGURES}}
+    assert expected_runs(config) == 15                  # 5 example levels x 3 definitions
+
+
+def test_full_plan_runs_every_example_level_and_definition(workdir):
+    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    jobs = planned_jobs(workdir)
+    assert jobs["run_case"] == expected_runs(config) == 36     # 12 example levels x 3
+    assert jobs["planar_errors"] == 12
+
+
+def planned_runs(root: Path, *args: str, target: str | None = None) -> set[str]:
+    """Run folders (results/runs/{case}/L{level}_{surface}) of the jobs a dry run of
+    ``target`` (default: all) plans; ``args`` last (``--configfile`` takes every word after it)."""
+    done = snakemake(root, "-n", "--forceall", *([target] if target else []), *args)
+    assert done.returncode == 0, done.stderr + done.stdout
+    return set(re.findall(r"results/runs/\w+/L\d+_\w+(?=/summary\.json)", done.stdout + done.stderr))
+
+
+@pytest.mark.parametrize("configfile", [None, "config/smoke.yaml"])
+def test_every_definition_is_planned(workdir, configfile):
+    """The three surface definitions at every level of every example; fig10 compares facets
+    with nurbs_fit as the paper does."""
+    args = ("--configfile", configfile) if configfile else ()
+    runs = planned_runs(workdir, *args)
+    assert {re.search(r"/L\d+_(\w+)$", path)[1] for path in runs} == {"facets", "nurbs_fe", "nurbs_fit"}
+    config = yaml.safe_load((REPO / (configfile or "config/config.yaml")).read_text())
+    assert len(runs) == expected_runs(config)
+    level = config["figures"]["fig10"]["level"]
+    fig10 = planned_runs(workdir, *args, target="paper_figures/fig10.png")
+    assert fig10 == {f"results/runs/planar/L{level}_facets", f"results/runs/planar/L{level}_nurbs_fit"}
+
+
+def test_fig10_falls_back_to_nurbs_fe(workdir, tmp_path):
+    """Without nurbs_fit among the surfaces, fig10 compares facets with nurbs_fe."""
+    extra = tmp_path / "two.yaml"
+    extra.write_text("surfaces: [facets, nurbs_fe]\n")
+    level = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["figures"]["fig10"]["level"]
+    fig10 = planned_runs(workdir, "--configfile", str(extra), target="paper_figures/fig10.png")
+    assert fig10 == {f"results/runs/planar/L{level}_facets", f"results/runs/planar/L{level}_nurbs_fe"}
+
+
+def test_lint_is_clean(workdir):
+    done = snakemake(workdir, "--lint")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "Congratulations" in done.stdout + done.stderr
+
+
+def test_a_bad_config_is_refused(workdir, tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("surfaces: [facets, hexagons]\n")
+    done = snakemake(workdir, "-n", "--configfile", str(bad))
+    assert done.returncode != 0 and "hexagons" in done.stdout + done.stderr
