@@ -24,7 +24,9 @@ def reference_json(path: Path, case: str = "chain3", mesh: float = 0.001, penalt
     path.write_text(json.dumps({
         "case": case, "supports": {"pulled": PULLED, "clamped": CLAMPED},
         "reference": {"dofs": 123456, "steps": steps},
-        "uncertainty": {"mesh": mesh, "penalty": penalty, "accepted": True}}))
+        "uncertainty": {"mesh": mesh, "penalty": penalty, "accepted": True,
+                        "meshes": [{"von_mises_change_to_finest": {"link_c": 0.04}},
+                                   {"von_mises_change_to_finest": {"link_c": 0.0}}]}}))
     return path
 
 
@@ -75,6 +77,8 @@ def test_validation_figure_draws_the_errors(tmp_path):
     assert dofs.get_xscale() == "log" and dofs.get_yscale() == "log"
     vm_lines = {line.get_label(): line for line in vm.get_lines()}
     np.testing.assert_allclose(vm_lines["facets"].get_ydata(), 0.5)          # 1 GPa against 2 GPa
+    # the peak's own uncertainty: its change between the reference's two finest meshes
+    np.testing.assert_allclose(vm_lines["reference uncertainty (4.00%)"].get_ydata(), 0.04)
 
 
 def test_claims_name_the_distance_of_their_runs(tmp_path):
@@ -84,7 +88,7 @@ def test_claims_name_the_distance_of_their_runs(tmp_path):
     text = reference_distance(runs, refs, "link_c")
     assert "facets L1 +25.00% (von Mises -50.00%)" in text
     assert "nurbs_fe L1 -2.00% (von Mises +50.00%)" in text
-    assert "0.10% uncertain" in text
+    assert "0.10% uncertain, its peak von Mises 4.00%" in text
     assert reference_distance(runs, {}) == "no reference of chain3 in this configuration"
     from cgfem.report.claims import Claim
     table = claims_markdown([Claim(4, "x", True, "n", text), Claim(1, "y", False, "m")])

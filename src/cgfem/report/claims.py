@@ -197,7 +197,8 @@ def _claim2_runs(runs: list[Run]) -> list[Run]:
 
 def reference_distance(runs: list[Run], refs: dict[str, Reference], body: str | None = None) -> str:
     """``"run: +x.xx %, ..."``: relative error of each run's final pulled reaction (and, with
-    ``body``, of its peak von Mises stress there) against its example's reference."""
+    ``body``, of its peak von Mises stress there) against its example's reference, headed by
+    the reference's uncertainties."""
     if not runs:
         return "no runs"
     parts = []
@@ -210,7 +211,10 @@ def reference_distance(runs: list[Run], refs: dict[str, Reference], body: str | 
             text += f" (von Mises {_percent(von_mises_error(run, ref, body))})"
         parts.append(text)
     some = refs[runs[0].case]
-    return (f"pulled reaction vs reference ({some.uncertainty:.2%} uncertain): " + ", ".join(parts))
+    head = f"pulled reaction vs reference ({some.uncertainty:.2%} uncertain"
+    if body is not None and body in some.von_mises_uncertainty:
+        head += f", its peak von Mises {some.von_mises_uncertainty[body]:.2%}"
+    return head + "): " + ", ".join(parts)
 
 
 def _percent(value: float) -> str:
