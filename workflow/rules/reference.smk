@@ -10,11 +10,11 @@ rule planar_reference:
         "python3 -m cgfem.reference.planar --out {output} > {log} 2>&1"
 
 
-# Body-fitted references of the chain examples (cgfem.reference.tori, NGSolve). Each costs
-# more than ten minutes on 2 cores (its mesh and penalty study), so it is a gold file in
-# config/reference/ holding the command that regenerates it; the rule checks that the gold
-# file was made by the current reference code (its script version) for the current case
-# file, and copies it (exit 1 naming the command if not).
+# Body-fitted references of the chain examples (cgfem.reference.tori, NGSolve). Their mesh
+# and penalty studies take 6-11 min each on one thread and need NGSolve, so each is a gold
+# file in config/reference/ holding the command that regenerates it; the rule checks that
+# the gold file was made by the current reference code (its script version) for the current
+# case file, and copies it (exit 1 naming the command if not).
 
 
 rule reference_chain2_steel:

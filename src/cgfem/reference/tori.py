@@ -23,9 +23,10 @@ peak von Mises stress of every body (Pa) with its position.
 The JSON (:func:`study`) records the meshes (sizes, elements, dofs), order, penalties,
 wall times, every run's per-step values, the versions of NGSolve and netgen, the SHA-256
 of the case file and the **script version**: a hash of the code of the reference modules,
-their sources without docstrings and comments (:func:`script_version`). A reference costing more than ten minutes is committed as
-a gold file; ``--from-gold`` checks that a gold file was made by the current script version
-for the current case file and copies it (exit 1 with the regenerating command if not).
+their sources without docstrings and comments (:func:`script_version`). The references are
+committed as gold files; ``--from-gold`` checks that a gold file was made by the current
+script version for the current case file and copies it (exit 1 with the regenerating
+command if not).
 
 Command line::
 
