@@ -55,9 +55,11 @@ def test_gold_file_is_current_and_complete(gold, tmp_path):
         assert abs(f_pulled + f_clamped) <= 1e-6 * f_pulled
         for pair in step["contact"].values():
             assert abs(abs(pair["force"][1]) - f_pulled) <= 1e-6 * f_pulled
-    # accepted, and by its own numbers: mesh and penalty changes of the reactions below 0.3 %
+    # the verdict its own numbers give: accepted when mesh and penalty changes are below 0.3 %
+    # (chain2_rubber is not: its mesh 3 is estimated 0.38 % from the limit)
     u = data["uncertainty"]
-    assert u["accepted"] and u["mesh"] < ACCEPT and u["penalty"] < ACCEPT
+    assert u["accepted"] == (u["mesh"] < ACCEPT and u["penalty"] < ACCEPT)
+    assert u["penalty"] < ACCEPT
     rows = u["meshes"]
     assert u["mesh"] >= rows[-2]["change_to_finest"] == u["mesh_change"]
 

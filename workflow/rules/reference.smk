@@ -11,7 +11,7 @@ rule planar_reference:
 
 
 # Body-fitted references of the chain examples (cgfem.reference.tori, NGSolve). Their mesh
-# and penalty studies take 6-11 min each on one thread and need NGSolve, so each is a gold
+# and penalty studies take 6-31 min each on one thread and need NGSolve, so each is a gold
 # file in config/reference/ holding the command that regenerates it; the rule checks that
 # the gold file was made by the current reference code (its script version) for the current
 # case file, and copies it (exit 1 naming the command if not).
