@@ -59,6 +59,12 @@ def test_full_plan_runs_every_example_level_and_definition(workdir):
     jobs = planned_jobs(workdir)
     assert jobs["run_case"] == expected_runs(config) == 36     # 12 example levels x 3
     assert jobs["planar_errors"] == 12
+    # the chains' references (copied from their gold files) and the figure drawn from them;
+    # the smoke plan above has neither
+    assert {rule: n for rule, n in jobs.items() if "reference" in rule} == {
+        "planar_reference": 1, "reference_chain2_steel": 1, "reference_chain2_rubber": 1,
+        "reference_chain3": 1}
+    assert jobs["validation"] == 1
 
 
 def planned_runs(root: Path, *args: str, target: str | None = None) -> set[str]:

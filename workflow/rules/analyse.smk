@@ -20,6 +20,7 @@ rule claims:
         errors=planar_error_tables(),
         chain2=summaries(config["claims"]["chain2"]),
         chain3=summaries("chain3"),
+        references=reference_files([config["claims"]["chain2"], "chain3"]),
     output:
         "results/claims.md",
     params:

@@ -1,4 +1,6 @@
 # Configuration check and the helpers every rule file uses (no rules here).
+import os
+
 from snakemake.utils import validate
 
 
@@ -64,3 +66,23 @@ def fig15_summaries():
 
 #: final products: figure name -> (PNG, PDF)
 FIGURES = ["fig09", "fig10", "fig13", "fig14", "fig15", "fig17", "newton", "timings", "geometry"]
+
+
+#: body-fitted references of the chain examples (workflow/rules/reference.smk has one rule
+#: per reference), example -> the case file it solves. The validation figure and the claims'
+#: distances use them only when every chain example is configured with that case file (the
+#: full run); a configuration with other loads or steps (the smoke one) skips them.
+REFERENCE_CASES = {c: f"config/cases/{c}.yaml" for c in ("chain2_steel", "chain2_rubber", "chain3")}
+REFERENCED = all(
+    c in EXAMPLES and os.path.normpath(EXAMPLES[c]["case"]) == os.path.normpath(f)
+    for c, f in REFERENCE_CASES.items()
+)
+FIGURES += ["validation"] if REFERENCED else []
+
+
+def reference_files(cases=None):
+    """results/reference/{case}.json of ``cases`` (default: every chain example), or none
+    when the configuration does not solve the references' cases."""
+    if not REFERENCED:
+        return []
+    return [f"results/reference/{c}.json" for c in (cases or REFERENCE_CASES)]

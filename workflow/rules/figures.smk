@@ -171,3 +171,25 @@ rule geometry:
         "logs/figures/geometry.log",
     script:
         "../scripts/figure.py"
+
+
+rule validation:
+    """Distance of every chain run to its example's body-fitted reference: pulled reaction
+    per load step, final reaction (and chain3's peak von Mises) against DOFs."""
+    input:
+        reference_files(),
+        [path for case in REFERENCE_CASES for path in summaries(case)],
+    output:
+        png=report(
+            "paper_figures/validation.png", caption="../report/validation.rst", category="Validation"
+        ),
+        pdf="paper_figures/validation.pdf",
+    params:
+        name="validation",
+        options={},
+    conda:
+        ENV
+    log:
+        "logs/figures/validation.log",
+    script:
+        "../scripts/figure.py"

@@ -1,4 +1,5 @@
-"""The claims table of the paper, from the planar error tables and the chain runs."""
+"""The claims table of the paper, from the planar error tables, the chain runs and the
+body-fitted references of the chains (when the configuration has them)."""
 import sys
 
 from cgfem.report.claims import claims, write_claims
@@ -10,4 +11,5 @@ with open(snakemake.log[0], "w") as sys.stderr:
         snakemake.input.errors, snakemake.input.chain2, snakemake.input.chain3,
         rate_tolerance=c["rate_tolerance"], reaction_level=c["reaction_level"],
         pulled=f["pulled"], component=AXES[f.get("component", "y")],
-        von_mises_levels=c["von_mises_levels"], von_mises_body=c["von_mises_body"]))
+        von_mises_levels=c["von_mises_levels"], von_mises_body=c["von_mises_body"],
+        references=list(getattr(snakemake.input, "references", []))))

@@ -7,6 +7,7 @@ from __future__ import annotations
 from cgfem.report.convergence import fig09_energy_error
 from cgfem.report.curves import (fig10_surface_profile, fig13_reactions, fig_geometry_error,
                                  fig_newton_residuals, fig_timings)
+from cgfem.report.validation import fig_validation
 
 #: figure name -> function(inputs, **options); the map figures import pyvista on first use
 FIGURES = {
@@ -16,11 +17,12 @@ FIGURES = {
     "newton": fig_newton_residuals,
     "timings": fig_timings,
     "geometry": fig_geometry_error,
+    "validation": fig_validation,
 }
 
 
 def figure(name: str, inputs: list[str], **options):
-    """Draw figure ``name`` from ``inputs`` (run summaries or error tables)."""
+    """Draw figure ``name`` from ``inputs`` (run summaries, error tables or reference JSONs)."""
     if name in ("fig14", "fig15", "fig17"):
         from cgfem.report import maps
 

@@ -12,11 +12,15 @@ claims").
 "The definitions" are those the results hold; the claim's text names them. "Converge" means
 status ``converged``: a run whose outer loop stopped at its cap (``outer_not_converged``) does
 not count as converged.
+
+Every claim on the chains also names the distance of each run it uses to the body-fitted
+reference of its example (:mod:`cgfem.report.validation`), when the pipeline has one: the
+relative error of the final pulled reaction and, for claim 4, of the peak von Mises stress.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Sequence
 
@@ -26,6 +30,7 @@ from cgfem.atomic import write_text_atomic
 from cgfem.report.convergence import OPTIMAL_RATE, rates
 from cgfem.report.energy import TOTAL, read_error_tables
 from cgfem.report.runs import Run, load_runs
+from cgfem.report.validation import Reference, final_error, load_references, von_mises_error
 
 #: the definitions in the order the claims list them
 NURBS = ("nurbs_fe", "nurbs_fit")
@@ -44,6 +49,8 @@ class Claim:
     text: str
     reproduced: bool
     numbers: str
+    #: distance of the runs the claim uses to the body-fitted reference ("" if none applies)
+    distance: str = ""
 
 
 def _find(runs: list[Run], surface: str, level: int) -> Run | None:
@@ -156,22 +163,72 @@ def _von_mises_at(runs: list[Run], level: int, body: str) -> tuple[bool | None, 
 
 def claims(error_tables, chain2_summaries, chain3_summaries, *, rate_tolerance: float,
            reaction_level: int, pulled: str, component: int, von_mises_levels: Sequence[int],
-           von_mises_body: str) -> list[Claim]:
-    """The four claims from the planar error tables and the chain2 and chain3 run folders."""
+           von_mises_body: str, references: Sequence = ()) -> list[Claim]:
+    """The four claims from the planar error tables and the chain2 and chain3 run folders;
+    ``references``: reference JSONs of :mod:`cgfem.reference.tori` (any of the chain
+    examples), whose distance to the runs each claim uses is added to it."""
     chain2, chain3 = load_runs(chain2_summaries), load_runs(chain3_summaries)
-    return [claim_optimal_rate(error_tables, rate_tolerance),
-            claim_coarse_facets(chain2, pulled, component),
-            claim_lower_reaction(chain2, reaction_level, pulled, component),
-            claim_lower_von_mises(chain3, von_mises_levels, von_mises_body)]
+    found = [claim_optimal_rate(error_tables, rate_tolerance),
+             claim_coarse_facets(chain2, pulled, component),
+             claim_lower_reaction(chain2, reaction_level, pulled, component),
+             claim_lower_von_mises(chain3, von_mises_levels, von_mises_body)]
+    refs = load_references(references)
+    used = {2: _claim2_runs(chain2), 3: [r for r in chain2 if r.level == reaction_level],
+            4: [r for r in chain3 if r.level in von_mises_levels and r.surface in ("facets", "nurbs_fe")]}
+    out = [replace(found[0], distance="energy-norm errors against the planar reference (numbers)")]
+    for claim in found[1:]:
+        out.append(replace(claim, distance=reference_distance(
+            used[claim.number], refs, von_mises_body if claim.number == 4 else None)))
+    return out
+
+
+def _claim2_runs(runs: list[Run]) -> list[Run]:
+    """The runs claim 2 uses: the coarsest level's and the finest converged nurbs_fe."""
+    if not runs:
+        return []
+    coarse = min(r.level for r in runs)
+    done = [r for r in runs if r.surface == "nurbs_fe" and r.converged]
+    chosen = [r for r in runs if r.level == coarse]
+    if done:
+        finest = max(done, key=lambda r: r.level)
+        chosen += [finest] if finest not in chosen else []
+    return chosen
+
+
+def reference_distance(runs: list[Run], refs: dict[str, Reference], body: str | None = None) -> str:
+    """``"run: +x.xx %, ..."``: relative error of each run's final pulled reaction (and, with
+    ``body``, of its peak von Mises stress there) against its example's reference, headed by
+    the reference's uncertainties."""
+    if not runs:
+        return "no runs"
+    parts = []
+    for run in runs:
+        ref = refs.get(run.case)
+        if ref is None:
+            return f"no reference of {run.case} in this configuration"
+        text = f"{run.label} {_percent(final_error(run, ref, ref.pulled))}"
+        if body is not None:
+            text += f" (von Mises {_percent(von_mises_error(run, ref, body))})"
+        parts.append(text)
+    some = refs[runs[0].case]
+    head = f"pulled reaction vs reference ({some.uncertainty:.2%} uncertain"
+    if body is not None and body in some.von_mises_uncertainty:
+        head += f", its peak von Mises {some.von_mises_uncertainty[body]:.2%}"
+    return head + "): " + ", ".join(parts)
+
+
+def _percent(value: float) -> str:
+    return "not reached" if not np.isfinite(value) else f"{value:+.2%}"
 
 
 def claims_markdown(found: list[Claim]) -> str:
     lines = ["# The paper's claims, checked on our results", "",
              "Generated by the pipeline (rule `claims`, `cgfem.report.claims`) from the result "
              "files; not edited by hand.", "",
-             "| # | claim | reproduced | numbers |", "|---|---|---|---|"]
-    lines += [f"| {c.number} | {c.text} | {'yes' if c.reproduced else 'no'} | {c.numbers} |"
-              for c in found]
+             "| # | claim | reproduced | numbers | distance to the reference |",
+             "|---|---|---|---|---|"]
+    lines += [f"| {c.number} | {c.text} | {'yes' if c.reproduced else 'no'} | {c.numbers} | "
+              f"{c.distance or 'no reference'} |" for c in found]
     return "\n".join(lines) + "\n"
 
 
