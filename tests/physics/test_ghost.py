@@ -48,6 +48,7 @@ def _condition_estimate(K) -> float:
     return float(spla.onenormest(K) * spla.onenormest(inverse))
 
 
+@pytest.mark.slow
 def test_ghost_penalty_bounds_condition_number_of_small_cut_cells():
     deltas = (1e-1, 1e-3, 1e-5)
     plain = [_condition(_stiffness(d, 0.0)[1], False) for d in deltas]
@@ -59,6 +60,7 @@ def test_ghost_penalty_bounds_condition_number_of_small_cut_cells():
     assert max(jacobi) < 100                        # measured 57
 
 
+@pytest.mark.slow
 def test_ghost_penalty_bounds_condition_number_at_order_2():
     """The triquadratic element's slivers: without the penalty the condition estimate grows
     at least like 1 / delta; with the jumps of the first and second normal derivatives it

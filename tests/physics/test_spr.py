@@ -12,6 +12,9 @@ from cgfem.fem.space import NODE_XI, Space
 from cgfem.geometry.builders import build_solid
 from cgfem.geometry.specs import SphereSpec, TorusSpec
 
+#: the fixtures embed the unit sphere at levels 0-3 (a minute)
+pytestmark = pytest.mark.slow
+
 OFFSET = (0.13, 0.29, 0.41)
 MU, LAM = 1.0, 1.5
 H0 = 0.4

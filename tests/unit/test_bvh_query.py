@@ -164,6 +164,7 @@ def test_leaves_are_nearly_flat(indexes):
 # ----------------------------------------------------------------------------------------
 # rays
 # ----------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_rays_through_a_rotated_torus_match_the_quartic(indexes):
     index = indexes["torus"]
     rng = np.random.default_rng(11)
@@ -278,6 +279,7 @@ def test_rays_through_shared_edges_and_corners_count_once(indexes):
 # ----------------------------------------------------------------------------------------
 # closest points
 # ----------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_closest_points_on_a_rotated_torus(indexes):
     index = indexes["torus"]
     rng = np.random.default_rng(7)

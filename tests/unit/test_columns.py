@@ -65,7 +65,8 @@ def _fitted_moments(index, grid, part, cut) -> np.ndarray:
     return _local_moments(grid, cut, fitted.element, fitted.x, fitted.w, fitted.element)
 
 
-@pytest.mark.parametrize("name,level", [("sphere", 1), ("torus", 1), ("half_torus", 1), ("half_torus", 2)])
+@pytest.mark.parametrize("name,level", [("sphere", 1), ("torus", 1), ("half_torus", 1),
+                                        pytest.param("half_torus", 2, marks=pytest.mark.slow)])
 def test_nurbs_rules_are_positive_and_inside(name, level):
     spec, h0 = SOLIDS[name]
     solid = build_solid(spec)
@@ -103,6 +104,7 @@ def test_nurbs_column_rules_match_moment_fitting(name):
     assert np.abs(got - rules.moments[ok]).max() <= 1e-12
 
 
+@pytest.mark.slow
 def test_fallback_is_rare_and_exact():
     """Elements where neither the columns nor the sub-tetrahedra are positive keep the
     moment-fitted rule: none on the link at levels 0-3; on a torus whose tube is barely

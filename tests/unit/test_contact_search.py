@@ -105,6 +105,7 @@ def _assert_same(a: RayHits, b: RayHits) -> None:
     np.testing.assert_allclose(a.g[a.found], b.g[a.found], rtol=0.0, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_search_equals_reference(scene):
     surface, x1, n1, u = scene
     fast = surface.search(u, x1, n1, MAX_GAP)
@@ -134,6 +135,7 @@ def test_master_facing_the_ray_is_no_hit(scene):
     np.testing.assert_allclose(inward.g, -0.1, atol=0.045)    # the random field (0.02 per dof): 0.030
 
 
+@pytest.mark.slow
 def test_search_from_previous_pairing_equals_reference(scene):
     """From a previous pairing whose master elements are not recorded (``slot=None``), the
     search equals the reference point by point."""

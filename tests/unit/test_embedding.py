@@ -51,7 +51,8 @@ def _closed_forms(name: str, spec) -> tuple[float, float]:
     return float(np.prod(size)), float(2 * (size[0] * size[1] + size[1] * size[2] + size[0] * size[2]))
 
 
-@pytest.mark.parametrize("level,seeds", [(0, range(6)), (1, range(3)), (2, range(1))])
+@pytest.mark.parametrize("level,seeds", [(0, range(6)), pytest.param(1, range(3), marks=pytest.mark.slow),
+                                         pytest.param(2, range(1), marks=pytest.mark.slow)])
 @pytest.mark.parametrize("name", ["sphere", "torus", "half_torus", "cylinder", "box"])
 def test_nurbs_volume_and_area_are_exact(name, level, seeds):
     for seed in seeds:
@@ -82,6 +83,7 @@ def test_points_lie_in_their_elements_and_statuses_agree():
     assert np.allclose(weights[inside], grid.h**3, rtol=1e-14)
 
 
+@pytest.mark.slow
 def test_divergence_theorem_volume_and_surface_rules_agree():
     """int_V div f dV = oint f.n dA for fields of degree <= 2 in each variable (exact for the
     moment-fitted rules), on a torus and a half torus with rotated axes."""

@@ -193,6 +193,7 @@ def test_degree4_sub_tetrahedra_on_a_tube_thinner_than_h():
     assert _relative_errors(grid, subset, rules.volume, reference).max() <= 1e-10
 
 
+@pytest.mark.slow
 def test_degree4_moment_fitted_rule_is_exact():
     """The fallback, 5x5x5 Gauss points of the cube with weights fitted to the exact moments
     (x-direction divergence theorem), integrates every monomial of degree <= 4 per variable;
@@ -211,6 +212,7 @@ def test_degree4_moment_fitted_rule_is_exact():
     assert np.abs(got - reference).max() <= 1e-10 * 8.0
 
 
+@pytest.mark.slow
 def test_embed_degree4_wires_every_rule():
     """``embed(..., degree=4)``: the degree recorded, 27 Gauss points on inside elements, at
     most 125 positive points in the material on cut elements and exact monomial moments on
