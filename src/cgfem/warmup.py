@@ -80,14 +80,15 @@ def _blocks() -> dict:
 
 class WarmupRun(NamedTuple):
     """One warm-up run: the problem's name, the surface definition, the run's status, its
-    wall time (s) and the contact force (3,) of the masters on the slaves at its last step
-    (N)."""
+    wall time (s), the contact force (3,) of the masters on the slaves and the support
+    reactions (support name -> (3,)) at its last step (N)."""
 
     problem: str
     surface: str
     status: str
     seconds: float
     contact_force: tuple[float, float, float]
+    reactions: dict[str, list[float]]
 
 
 def warm_up(log: Callable[[str], None] | None = None) -> list[WarmupRun]:
@@ -116,7 +117,8 @@ def warm_up(log: Callable[[str], None] | None = None) -> list[WarmupRun]:
                 log(f"{case.name} with {surface}: {status.status} ({seconds:.1f} s)")
                 steps = json.loads(status.summary.read_text())["steps"]
                 force = tuple(steps[-1]["contact"]["force"]) if steps else (0.0, 0.0, 0.0)
-                done.append(WarmupRun(case.name, surface, status.status, seconds, force))
+                reactions = steps[-1]["reactions"] if steps else {}
+                done.append(WarmupRun(case.name, surface, status.status, seconds, force, reactions))
                 if status.status != CONVERGED:
                     raise RuntimeError(f"warm-up run {case.name} with {surface} ended {status.status}: "
                                        f"{status.message}")

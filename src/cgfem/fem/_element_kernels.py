@@ -75,7 +75,9 @@ def basis(ijk, order, xi, h, N, dN):
 
 @njit(cache=True)
 def basis_second(ijk, order, xi, h, N, dN, d2N):
-    """:func:`basis` and the physical second derivatives ``d2N`` (n_nodes, 3, 3)."""
+    """:func:`basis` and the physical second derivatives ``d2N`` (n_nodes, 3, 3), from one
+    evaluation of the 1D polynomials (the contact search calls it per master point: calling
+    :func:`basis` first would evaluate them twice)."""
     s = 2.0 / h
     for a in range(ijk.shape[0]):
         l0, d0, e0 = lagrange(order, xi[0], ijk[a, 0])
