@@ -318,8 +318,6 @@ def run_case(case: Case, level: int, surface: str, out: Path,
         raise InputError("--surface", f"must be one of {', '.join(SURFACES)}, got {surface!r}")
     if order not in ORDERS:
         raise InputError("--order", f"must be one of {', '.join(map(str, ORDERS))}, got {order!r}")
-    if case.contact and order != 1:
-        raise InputError("--order", f"contact with order {order} is not implemented yet (order 1 only)")
     if case.solver.linear != "auto" and case.solver.linear not in available_backends():
         raise InputError("solver.linear", f"backend {case.solver.linear!r} is not available here "
                          f"(available: {', '.join(available_backends())})")

@@ -196,15 +196,6 @@ def test_unknown_element_order_is_bad_input(tmp_path, capsys, order, message):
     assert not out.exists()
 
 
-def test_contact_with_order_2_is_refused_until_it_is_implemented(tmp_path, capsys):
-    out = tmp_path / "o"
-    code = main(["run", str(CASES / "chain3.yaml"), "--level", "0", "--surface", "nurbs_fe", "--out", str(out),
-                 "--order", "2"])
-    assert code == 2
-    assert "contact with order 2" in _one_error_line(capsys, "--order")
-    assert not out.exists()
-
-
 def test_refused_run_leaves_no_folder(tmp_path, capsys):
     """Refused by the memory estimate: neither the folder nor its missing parents appear."""
     out = tmp_path / "a" / "b"

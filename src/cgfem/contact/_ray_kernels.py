@@ -1,7 +1,7 @@
 """Numba kernels of the NURBS+FE ray tracing (:class:`cgfem.contact.surfaces.NurbsFeSurface`).
 
 The current master surface is ``x2(theta) = Q(theta) + N(zeta(Q)) . U2`` (eq. 16): ``Q`` a
-NURBS patch, ``N`` the H8 shape functions of the grid element holding ``Q`` and ``U2`` its
+NURBS patch, ``N`` the shape functions (8 or 27 nodes) of the grid element holding ``Q`` and ``U2`` its
 nodal displacements. Per slave point ``(x1, n1)`` a Newton solve of
 ``F = x2(theta) - x1 - g n1 = 0`` on ``(xi, eta, g)`` runs from each start in turn; the first
 admissible hit (converged, ``|g| <= max_gap``, master normal against ``n1``) is kept.
@@ -13,7 +13,7 @@ Flat data (all contiguous):
   ``knots[o : o + n_u + p + 1]``, its ``knots_v`` follow them, and its homogeneous control
   net (n_u, n_v, 4) is ``control[c : c + 4 n_u n_v]``;
 - the grid of the master space: ``origin`` (3,), ``h``, ``shape`` (3,) elements per axis,
-  ``elements`` ascending grid ids of the active elements, ``connectivity`` (n_el, 8) and the
+  ``elements`` ascending grid ids of the active elements, ``connectivity`` (n_el, n_nodes) and the
   nodal displacements ``u`` (n_nodes, 3);
 - starts: ``start_piece`` (n, k) patch, ``start_theta`` (n, k, 2), tried in column order up
   to the first ``start_piece < 0``.

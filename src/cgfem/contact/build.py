@@ -7,8 +7,11 @@ same surface definition. ``max_gap`` (the farthest a ray looks) is
 :data:`~cgfem.contact.pair.MAX_GAP_H` times the larger element size of the two bodies.
 
 With ``rule: segmented`` (:mod:`cgfem.contact.rule`) the slave points are instead the exact
-slave patches split by both grids' planes, at most 27 points per part (NURBS definitions
+slave patches split by both grids' planes, at most ``(degree + 1)^3`` points per part (NURBS definitions
 only: a facets pair so configured is refused).
+
+Every surface works with the element of its body's space (:mod:`cgfem.fem.element`):
+the slave points and master points move with that element's field, of order 1 or 2.
 
 ``nurbs_fit``: both sides are fitted surfaces (:class:`~cgfem.contact.fitted.FittedSurface`)
 of the pair's patches, fitted on each body's exact surface rule in the fitting space the
@@ -43,7 +46,8 @@ def _slave_rule(spec: ContactSpec, solid: Solid, emb, master_emb, ids: np.ndarra
     ``ids`` of the slave ``solid`` embedded as ``emb``; ``fits``: the slave's fitted patches
     (``nurbs_fit``), whose knot lines the segmented rule also splits at."""
     if spec.rule == "segmented":
-        return segmented_rule(solid, emb.grid, master_emb.grid, ids, {f.patch: f.surface for f in fits})
+        return segmented_rule(solid, emb.grid, master_emb.grid, ids, {f.patch: f.surface for f in fits},
+                              degree=emb.degree)
     return emb.boundary.select(np.isin(emb.boundary.patch, ids) & (emb.boundary.w > 0.0))
 
 

@@ -161,12 +161,12 @@ def surface_basis(surface: NurbsSurface, uv: np.ndarray) -> SurfaceBasis:
 
 
 def fe_shape_matrix(space: Space, x: np.ndarray) -> sp.csr_matrix:
-    """(n, n_nodes) H8 shape functions of ``space`` at points ``x`` (n, 3) (located in their
-    active elements); a point in no active element is a ValueError."""
+    """(n, n_nodes) shape functions of ``space``'s element at points ``x`` (n, 3) (located
+    in their active elements); a point in no active element is a ValueError."""
     slots, xi = locate_points(space, x)
-    N = shape_functions(xi, space.h)[0]
-    n = slots.size
-    return sp.csr_matrix((N.ravel(), space.connectivity[slots].ravel(), np.arange(0, 8 * n + 1, 8)),
+    N = shape_functions(xi, space.h, space.element)[0]
+    n, k = N.shape
+    return sp.csr_matrix((N.ravel(), space.connectivity[slots].ravel(), np.arange(0, k * n + 1, k)),
                          shape=(n, space.n_nodes))
 
 
@@ -362,7 +362,7 @@ class PatchFit:
         return float(self.w.sum())
 
     def rule_matrices(self) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-        """R (n_q, n_ctrl): the fitting basis, and N (n_q, n_nodes): the H8 shape functions,
+        """R (n_q, n_ctrl): the fitting basis, and N (n_q, n_nodes): the FE shape functions,
         at the rule points (``M = R^T W R``, ``G = R^T W N``, W the weights)."""
         return surface_basis(self.surface, self.uv).matrix(), fe_shape_matrix(self.space, self.x)
 

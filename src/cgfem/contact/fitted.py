@@ -101,6 +101,8 @@ class FittedSurface(RaySurface):
     """The fitted patches of one body as a contact surface (module docstring)."""
 
     definition = "nurbs_fit"
+    #: no point moves further than its controls' largest move (NURBS weights are non-negative)
+    lebesgue = 1.0
 
     def __init__(self, body: int, fits: Sequence[PatchFit], seeds: SurfaceQuadrature, scale: float):
         """``fits``: the body's fitted patches that may touch; ``seeds``: a dense exact surface

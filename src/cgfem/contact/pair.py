@@ -51,15 +51,22 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
+from threadpoolctl import ThreadpoolController
 
 from cgfem.contact import _ray_kernels as _rk
 from cgfem.contact.kinematics import (SlaveFrames, area_weight, gap_derivatives, gap_gradient_direction,
                                       slave_state)
 from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface, RayHits, shape_derivatives
 
-#: slave points whose (D, D) tangents (D = 48 for NURBS+FE and facets) are formed at once
-#: (memory: about 0.3 GB per chunk with the temporaries of the second derivatives at D = 48)
+#: slave points whose (D, D) tangents (D = 48 for NURBS+FE and facets with trilinear
+#: elements, 162 with triquadratic ones) are formed at once at D = 48, and proportionally
+#: fewer at larger D (memory: about 0.3 GB per chunk with the temporaries of the second
+#: derivatives)
 CHUNK_POINTS = 2048
+#: the BLAS libraries loaded (numpy's and scipy's OpenBLAS): their thread count is held at one
+#: around the tangent blocks' small matrix products (:func:`_group_blocks`), where threads
+#: only contend
+_BLAS = ThreadpoolController()
 #: switches of one point's active status in one Newton solve before its status is held
 MAX_SWITCHES = 10
 #: returns of one active point's hit to the master piece it had just left, in one increment,
@@ -147,7 +154,7 @@ class ContactPair:
     """A slave body's points against a master body's surface.
 
     slave, master : index of the bodies in the system
-    frames : slave point data; grad_N (n, 8, 3) shape gradients at the slave points
+    frames : slave point data; grad_N (n, n_nodes, 3) shape gradients at the slave points
     slave_surface : the slave side's surface when its points move with unknowns other than
         the slave body's dofs (``nurbs_fit``: a :class:`~cgfem.contact.fitted.FittedSurface`);
         None: they move with the body's FE field
@@ -179,6 +186,11 @@ class ContactPair:
     def n_points(self) -> int:
         return self.frames.size
 
+    @property
+    def _slave_lebesgue(self) -> float:
+        """No slave point moves further than this times the largest move of its nodes."""
+        return self.slave_space.element.lebesgue if self.slave_surface is None else self.slave_surface.lebesgue
+
     # -- kinematics ------------------------------------------------------------------------
     def _slave(self, u_s: np.ndarray):
         U1 = u_s.reshape(-1, 3)[self.frames.nodes]
@@ -202,13 +214,16 @@ class ContactPair:
         was built, and the samples within ``reach`` of one of those points (the only seeds or
         triangles their rays can need); ``skin = SKIN * max_gap``. It is rebuilt once the
         slave points and the master surface may have moved towards each other by more than
-        ``skin``: the largest nodal move of the slave's plus the master's kinematic vector
-        (points are convex combinations of their nodes: trilinear, barycentric and NURBS
-        weights are non-negative). ``x`` (n, 3): the current slave points."""
+        ``skin``: the largest nodal move of the slave's and of the master's kinematic vector,
+        each times the Lebesgue constant of its interpolation (1 where points are convex
+        combinations of their nodes: trilinear, barycentric and NURBS weights are
+        non-negative; :attr:`~cgfem.fem.element.Hexahedron.lebesgue` for the triquadratic
+        field). ``x`` (n, 3): the current slave points."""
         skin = SKIN * self.max_gap
         c = self.state.candidates
         if c is not None and c[2].shape == u_s.shape and c[3].shape == u_m.shape \
-                and _largest_move(u_s - c[2]) + _largest_move(u_m - c[3]) <= skin:
+                and self._slave_lebesgue * _largest_move(u_s - c[2]) \
+                + self.surface.lebesgue * _largest_move(u_m - c[3]) <= skin:
             return c[0], c[1]
         points, radius = self.surface.samples(u_m)
         reach = self.max_gap + radius + skin
@@ -235,7 +250,7 @@ class ContactPair:
             N = self.frames.phi
         else:                               # the FE shape functions at the reference point
             N = shape_derivatives((self.frames.X - self.slave_space.centres()[self.frames.slot])
-                                  / (0.5 * self.slave_space.h), self.slave_space.h)[0]
+                                  / (0.5 * self.slave_space.h), self.slave_space.h, self.slave_space.element)[0]
         stress = np.einsum("pa,paij->pij", N, recovered[conn])                  # (n, 3, 3)
         if self.finite:
             U = u_body.reshape(-1, 3)[conn]
@@ -273,6 +288,11 @@ class ContactPair:
         r_s = np.zeros(u_s.size)
         r_m = np.zeros(u_m.size)
         rows = np.flatnonzero(active)
+        if tangent and rows.size:
+            # points of one (slave element, master piece and element) group next to each
+            # other, so that their blocks are summed within a chunk (:meth:`_add_points`)
+            slot = hits.slot[rows] if hits.slot is not None else np.full(rows.size, -1, np.int64)
+            rows = rows[np.lexsort((hits.piece[rows], slot, self.frames.slot[rows]))]
         n = u_s.size + u_m.size
         # points in chunks: each carries (D, D) blocks and their temporaries (a few kB at D = 48);
         # the triplets of several chunks are summed chunk by chunk (memory)
@@ -311,9 +331,12 @@ class ContactPair:
         np.add.at(r_m, dofs_m, f[:, s1:])
         if not tangent:
             return None
-        K = (d.w * self.eps)[:, None, None] * d.dg[:, :, None] * d.dg[:, None, :] \
-            + (d.w * lam_r)[:, None, None] * d.d2g + lam_r[:, None, None] * d.dg[:, :, None] * d.dw[:, None, :]
+        # K_c = w eps dg dg^T + w lam g_vv + lam dg dw^T, from the factors of g_vv
+        c = (d.w * lam_r)[:, None, None]
+        u = np.concatenate([d.dg[:, None], d.u], axis=1)                          # (k, 7, D)
+        v = np.concatenate([((d.w * self.eps)[:, None] * d.dg + lam_r[:, None] * d.dw)[:, None], c * d.v], axis=1)
         dofs = np.concatenate([dofs_s, dofs_m + u_s.size], axis=1)                # (k, D)
+        dofs, K = _group_blocks(dofs, u, v, d.s, c * d.t)
         size = dofs.shape[1]
         rr = np.repeat(dofs, size, axis=1).ravel()
         cc = np.tile(dofs, (1, size)).ravel()
@@ -373,6 +396,35 @@ class ContactPair:
                              self.state.p_N.copy(), force, st.x - self.frames.X)
 
 
+def _group_blocks(dofs: np.ndarray, u: np.ndarray, v: np.ndarray, s: np.ndarray, t: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The tangent blocks ``sum_r u_r v_r^T + [[sum_r s_r t_r^T, 0], [0, 0]]`` of points
+    (``u``, ``v`` (k, R, D), ``s``, ``t`` (k, R', S), S <= D) summed over the points of equal
+    dof rows ``dofs`` (k, D): the distinct rows (g, D) and their blocks (g, D, D). Points of
+    one slave element paired with one master element share their dofs (dozens per group with
+    triquadratic elements): each group's block is one matrix product of its stacked factors,
+    and the sparse assembly gets a block per group instead of one per point. Rows equal up
+    to their order are not merged (they stay correct, only not summed)."""
+    k, size = dofs.shape
+    new = np.r_[True, np.any(dofs[1:] != dofs[:-1], axis=1)]
+    if k > 1 and new.all():
+        # not grouped by the caller's order: group by sorting
+        inverse = np.unique(dofs, axis=0, return_inverse=True)[1].ravel()
+        if inverse.max() + 1 < k:
+            order = np.argsort(inverse, kind="stable")
+            dofs, u, v, s, t = dofs[order], u[order], v[order], s[order], t[order]
+            new = np.r_[True, np.any(dofs[1:] != dofs[:-1], axis=1)]
+    starts = np.flatnonzero(new)
+    ends = np.r_[starts[1:], k]
+    S = s.shape[2]
+    K = np.empty((starts.size, size, size))
+    with _BLAS.limit(limits=1, user_api="blas"):
+        for i, (a, b) in enumerate(zip(starts, ends)):
+            K[i] = u[a:b].reshape(-1, size).T @ v[a:b].reshape(-1, size)
+            K[i, :S, :S] += s[a:b].reshape(-1, S).T @ t[a:b].reshape(-1, S)
+    return dofs[starts], K
+
+
 def _largest_move(du: np.ndarray) -> float:
     """The largest nodal displacement norm of ``du`` (3 n,)."""
     return float(np.sqrt(np.max(np.sum(du.reshape(-1, 3) ** 2, axis=1), initial=0.0)))
@@ -396,7 +448,7 @@ def _slots(hits: RayHits, rows: np.ndarray) -> np.ndarray | None:
 
 
 def slave_gradients(space, frames: SlaveFrames) -> np.ndarray:
-    """Shape gradients (n, 8, 3) at the slave points (from their reference positions)."""
+    """Shape gradients (n, n_nodes, 3) at the slave points (from their reference positions)."""
     centre = space.centres()[frames.slot]
     xi = (frames.X - centre) / (0.5 * space.h)
-    return shape_derivatives(xi, space.h)[1]
+    return shape_derivatives(xi, space.h, space.element)[1]

@@ -68,7 +68,7 @@ def shape_derivatives(xi: np.ndarray, h: float, element: Hexahedron = HEX8
 
 
 def element_values(space: Space, u: np.ndarray, slots: np.ndarray) -> np.ndarray:
-    """Nodal displacements (n, 8, 3) of active elements ``slots``."""
+    """Nodal displacements (n, n_nodes, 3) of active elements ``slots``."""
     return u.reshape(-1, 3)[space.connectivity[slots]]
 
 
@@ -295,11 +295,20 @@ class RaySurface:
 
 
 class NurbsFeSurface(RaySurface):
-    """NURBS+FE contact surface of a body (exact patches + the body's H8 displacement)."""
+    """NURBS+FE contact surface of a body (exact patches + the body's FE displacement, of the
+element of its space)."""
 
     definition = "nurbs_fe"
-    #: nodes a surface point moves with (those of its grid element)
-    width = 8
+
+    @property
+    def width(self) -> int:
+        """Nodes a surface point moves with (those of its grid element)."""
+        return self.space.element.n_nodes
+
+    @property
+    def lebesgue(self) -> float:
+        """No surface point moves further than this times the largest move of the nodes."""
+        return self.space.element.lebesgue
 
     def __init__(self, solid: Solid, space: Space, surface: SurfaceQuadrature, patches: np.ndarray):
         """``surface``: a dense exact surface rule of the body (seeds of the search);
@@ -315,12 +324,12 @@ class NurbsFeSurface(RaySurface):
         #: the largest distance from a seed to its nearest neighbour (about the distance from
         #: any surface point to its nearest seed)
         self.spacing = float(cKDTree(seeds).query(seeds, k=2)[0][:, 1].max()) if seeds.shape[0] > 1 else self.h
-        # reference positions (n_seeds, 3) and shape functions (n_seeds, 8) of the seeds
+        # reference positions (n_seeds, 3) and shape functions (n_seeds, n_nodes) of the seeds
         self._seed_X = np.empty((self.seed_piece.size, 3))
         for pid in np.unique(self.seed_piece):
             rows = self.seed_piece == pid
             self._seed_X[rows] = solid.patches[pid].surface.evaluate(self.seed_theta[rows])
-        self._seed_N = shape_derivatives(self._seed_xi, self.h)[0]
+        self._seed_N = shape_derivatives(self._seed_xi, self.h, space.element)[0]
         self._centres = space.centres()
         self._layout, self._knots, self._control = pack_patches([p.surface for p in solid.patches])
 
@@ -334,7 +343,7 @@ class NurbsFeSurface(RaySurface):
             d = self.solid.patches[pid].surface.derivatives(rule.uv[rows], 1)
             A[rows], B[rows] = d[:, 1, 0], d[:, 0, 1]
         slots, xi = locate_points(self.space, rule.x)
-        N, dN, _ = shape_derivatives(xi, self.h)
+        N, dN, _ = shape_derivatives(xi, self.h, self.space.element)
         ca = np.einsum("paj,pj->pa", dN, A)
         cb = np.einsum("paj,pj->pa", dN, B)
         return SlaveFrames(slots, self.space.connectivity[slots], rule.x.copy(), A, B, N, ca, cb, rule.w.copy())
@@ -361,16 +370,16 @@ class NurbsFeSurface(RaySurface):
         else:
             slots = np.asarray(slot, np.int64)
             xi = (X - self._centres[slots]) / (0.5 * self.h)
-        N, dN, d2N = shape_derivatives(xi, self.h)
+        N, dN, d2N = shape_derivatives(xi, self.h, self.space.element)
         U = element_values(self.space, u, np.maximum(slots, 0))
-        psi = np.einsum("paj,pcj->pca", dN, Qt)                     # dN . Q_alpha  (n, 2, 8)
+        psi = np.einsum("paj,pcj->pca", dN, Qt)                     # dN . Q_alpha  (n, 2, n_nodes)
         x = X + np.einsum("pa,pak->pk", N, U)
         t = Qt + np.einsum("pca,pak->pck", psi, U)
         s = np.zeros((n, 2, 2, 3))
         if second:
             Qs = np.stack([np.stack([Q[:, 2, 0], Q[:, 1, 1]], 1), np.stack([Q[:, 1, 1], Q[:, 0, 2]], 1)], 1)
             coef = (np.einsum("pajl,pcj,pdl->pcda", d2N, Qt, Qt)
-                    + np.einsum("paj,pcdj->pcda", dN, Qs))           # (n, 2, 2, 8)
+                    + np.einsum("paj,pcdj->pcda", dN, Qs))           # (n, 2, 2, n_nodes)
             s = Qs + np.einsum("pcda,pak->pcdk", coef, U)
         m2 = np.cross(t[:, 0], t[:, 1])
         normal = m2 / np.linalg.norm(m2, axis=1)[:, None]
@@ -379,11 +388,14 @@ class NurbsFeSurface(RaySurface):
     def _may_hit(self, u: np.ndarray, x1: np.ndarray, max_gap: float, n1: np.ndarray) -> np.ndarray:
         """(n,) bool: the ray segment ``x1 + g n1``, ``|g| <= max_gap`` ((n, 3) each), may
         meet the master. A master point ``x = Q + N . U2`` of element ``e`` lies in the box of
-        the element's cube moved by the range of its nodal displacements (``N >= 0`` sums to
-        1); a segment that meets no such box (widened by a margin for the locator's and
+        the element's cube moved by the range of the Bernstein coefficients of its
+        displacement (:attr:`~cgfem.fem.element.Hexahedron.to_bernstein`: the nodal values
+        themselves at order 1, where ``N >= 0`` sums to 1); a segment that meets no such box (widened by a margin for the locator's and
         Newton's tolerances) has no hit, and its point is skipped. Boxes near the segment's
         midpoint are found with a k-d tree, then cut against the segment (slab test)."""
-        U = u.reshape(-1, 3)[self.space.connectivity]                  # (n_el, 8, 3)
+        U = u.reshape(-1, 3)[self.space.connectivity]                  # (n_el, n_nodes, 3)
+        if self.space.element.order > 1:
+            U = np.einsum("ab,ebk->eak", self.space.element.to_bernstein, U)
         lo, hi = U.min(axis=1), U.max(axis=1)
         centre = self._centres + 0.5 * (lo + hi)
         half = 0.5 * self.h + 0.5 * (hi - lo) + 1e-6 * self.h           # (n_el, 3)
@@ -428,8 +440,18 @@ class FacetSurface:
     """Linear-facet contact surface (marching-cubes triangles moved with the FE field)."""
 
     definition = "facets"
-    #: nodes a surface point moves with (those of its grid element)
-    width = 8
+
+    @property
+    def width(self) -> int:
+        """Nodes a surface point moves with (those of its grid element)."""
+        return self.space.element.n_nodes
+
+    @property
+    def lebesgue(self) -> float:
+        """No surface point moves further than this times the largest move of the nodes (a
+        point is a convex combination of its triangle's vertices, each moved by the element's
+        field)."""
+        return self.space.element.lebesgue
 
     def __init__(self, space: Space, triangles: np.ndarray, elements: np.ndarray, keep: np.ndarray):
         """``triangles`` (m, 3, 3) reference vertices (counterclockwise about the outward
@@ -442,7 +464,8 @@ class FacetSurface:
             raise ValueError("facet triangle in an inactive element")
         centre = space.centres()[self.slot]
         xi = (self.triangles - centre[:, None, :]) / (0.5 * space.h)
-        self.vertex_N = shape_derivatives(xi.reshape(-1, 3), space.h)[0].reshape(-1, 3, 8)
+        self.vertex_N = shape_derivatives(xi.reshape(-1, 3), space.h, space.element)[0].reshape(
+            -1, 3, space.element.n_nodes)
         self.candidates = np.flatnonzero(keep)
 
     def _coefficients(self, tri: np.ndarray, theta: np.ndarray):
@@ -476,7 +499,7 @@ class FacetSurface:
     def _vertices(self, u: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
         """Current vertices (m, 3, 3) of the candidate triangles (those ``near`` of them)."""
         cand = self.candidates if near is None else self.candidates[near]
-        U = u.reshape(-1, 3)[self.space.connectivity[self.slot[cand]]]          # (m, 8, 3)
+        U = u.reshape(-1, 3)[self.space.connectivity[self.slot[cand]]]          # (m, n_nodes, 3)
         return self.triangles[cand] + np.einsum("mva,mak->mvk", self.vertex_N[cand], U)
 
     def samples(self, u: np.ndarray) -> tuple[np.ndarray, float]:

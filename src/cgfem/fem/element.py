@@ -16,6 +16,7 @@ needs and its cell type are read from the element everywhere; no other module as
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -65,6 +66,24 @@ class Hexahedron:
         return -1.0 + (2.0 / self.order) * self.node_ijk
 
     @property
+    def to_bernstein(self) -> np.ndarray:
+        """(n_nodes, n_nodes) the map from nodal values to the coefficients of the same
+        polynomial in the tensor-product Bernstein basis of the element's order (node
+        layout alike). The Bernstein basis is non-negative and sums to one, so a field on the
+        element lies in the convex hull of its Bernstein coefficients: the bound the contact
+        search takes for an element's displaced box (Lagrange shape functions of order 2 go
+        negative, and the nodal values alone do not bound the field). The identity at order 1."""
+        return _bernstein_map(self.order, self.node_ijk)
+
+    @property
+    def lebesgue(self) -> float:
+        """The element's Lebesgue constant ``max_xi sum_a |N_a(xi)|`` over the cube: no point
+        of an element moves further than this times its largest nodal move. 1 at order 1
+        (non-negative shape functions); ``(5/4)^3`` at order 2 (``|l_0| + |l_1| + |l_2|``
+        peaks at 5/4 at ``x = +-1/2``)."""
+        return 1.0 if self.order == 1 else 1.25 ** 3
+
+    @property
     def vertices(self) -> np.ndarray:
         """(8,) the element's corner nodes (the first eight), in the grid's corner order."""
         return np.arange(8)
@@ -82,6 +101,19 @@ class Hexahedron:
         xi = np.ascontiguousarray(np.asarray(xi, float).reshape(-1, 3))
         N, dN, d2N = kern.basis_at(self.node_ijk, self.order, xi, float(h), second)
         return (N, dN, d2N) if second else (N, dN)
+
+
+def _bernstein_map(order: int, node_ijk: np.ndarray) -> np.ndarray:
+    """:attr:`Hexahedron.to_bernstein`: the inverse of the 1D collocation matrix
+    ``V[i, j] = B_j(t_i)`` (Bernstein polynomials of ``order`` at the equally spaced nodes
+    ``t_i = i / order`` of [0, 1]), taken in tensor product over the node layout."""
+    t = np.arange(order + 1) / order
+    j = np.arange(order + 1)
+    binom = np.array([math.comb(order, k) for k in j], float)
+    V = binom[None, :] * t[:, None] ** j[None, :] * (1.0 - t[:, None]) ** (order - j[None, :])
+    T = np.linalg.inv(V)
+    a, b = node_ijk[:, None, :], node_ijk[None, :, :]
+    return T[a[..., 0], b[..., 0]] * T[a[..., 1], b[..., 1]] * T[a[..., 2], b[..., 2]]
 
 
 #: the trilinear hexahedron (H8), the paper's element
