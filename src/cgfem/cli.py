@@ -27,7 +27,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from cgfem import __version__
-from cgfem.case.model import SURFACES
+from cgfem.definitions import NAMES as SURFACES
 from cgfem.errors import InputError, RunInterrupted
 
 EXIT_OK = 0

@@ -20,13 +20,14 @@ import numba
 import numpy as np
 
 from cgfem import __version__
-from cgfem.case.model import SURFACES, Body, Case
+from cgfem.case.model import Body, Case
 from cgfem.embedding.quadrature import Embedding, embed, grid_for
 from cgfem.embedding.tessellate import Tessellation, boundary_tessellation, keep_vertices
 from cgfem.contact.assembly import summary as contact_summary
-from cgfem.contact.build import DEFINITIONS as CONTACT_DEFINITIONS, build_pair
+from cgfem.contact.build import build_pair
 from cgfem.contact.fit import FIT_NAME_SEPARATOR, fit_mesh, write_fit_json, write_fit_vtu
 from cgfem.contact.output import write_contact
+from cgfem.definitions import NAMES as SURFACES, NURBS_DEFINITIONS, surface_definition
 from cgfem.errors import InputError, RunInterrupted
 from cgfem.fem.body import BodyModel, boundary_of
 from cgfem.fem.element import ORDERS, hexahedron
@@ -140,11 +141,13 @@ def thread_settings() -> dict:
 
 def embed_body(solid, body: Body, level: int, surface: str, order: int = 1) -> Embedding:
     """``body`` embedded in its grid of ``level`` for the surface definition ``surface``
-    (``facets``, ``nurbs_fe`` or ``nurbs_fit``): the boundary quadrature of
-    ``SURFACES[surface]``, the definition's name kept as ``Embedding.definition``, and rules
-    exact to the degree the element of ``order`` needs (:attr:`~cgfem.fem.element.Hexahedron.degree`)."""
-    return embed(solid, grid_for(solid, body.grid.h0, level, body.grid.offset), SURFACES[surface],
-                 definition=surface, degree=hexahedron(order).degree)
+    (:mod:`cgfem.definitions`): the boundary quadrature of the definition's
+    :attr:`~cgfem.definitions.SurfaceDefinition.quadrature`, the definition's name kept as
+    ``Embedding.definition``, and rules exact to the degree the element of ``order`` needs
+    (:attr:`~cgfem.fem.element.Hexahedron.degree`)."""
+    grid = grid_for(solid, body.grid.h0, level, body.grid.offset)
+    return embed(solid, grid, surface_definition(surface).quadrature, definition=surface,
+                 degree=hexahedron(order).degree)
 
 
 def build_models(case: Case, level: int, surface: str, log: Callable[[str], None], order: int = 1
@@ -158,13 +161,10 @@ def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None
                  ) -> tuple[list, dict, dict]:
     """Embed and discretize every body with the element of ``order``: the models, per-body
     measures and the solids."""
-    if case.contact and surface not in CONTACT_DEFINITIONS:
-        raise InputError("--surface", f"contact with {surface!r} is not implemented yet "
-                         f"(available: {', '.join(CONTACT_DEFINITIONS)})")
     for i, spec in enumerate(case.contact):
-        if spec.rule == "segmented" and surface == "facets":
+        if spec.rule == "segmented" and not surface_definition(surface).exact_surface:
             raise InputError(f"contact[{i}].rule", "'segmented' needs a NURBS surface definition "
-                                                   "(--surface nurbs_fe or nurbs_fit), not facets")
+                                                   f"(--surface {' or '.join(NURBS_DEFINITIONS)}), not {surface}")
     solids = {b.name: build_solid(b.geometry) for b in case.bodies}
     brep = {name: brep_measures(solid) for name, solid in solids.items()}
     check_memory(case, level, brep, order=order)

@@ -27,12 +27,12 @@ from pathlib import Path
 from typing import Callable, NamedTuple
 
 from cgfem.case.load import parse_case
-from cgfem.case.model import SURFACES
+from cgfem.definitions import NAMES
 from cgfem.run import run_case
 from cgfem.solve.static import CONVERGED
 
-#: every surface definition a case can name (:data:`cgfem.case.model.SURFACES`)
-SURFACE_DEFINITIONS = tuple(sorted(SURFACES))
+#: every surface definition a case can name (:data:`cgfem.definitions.NAMES`)
+SURFACE_DEFINITIONS = tuple(sorted(NAMES))
 
 _LINK = {"builder": "half_torus", "major_radius": 0.02, "minor_radius": 0.005}
 _STEEL = {"model": "neo_hookean", "E": 116.0e9, "nu": 0.3}

@@ -24,7 +24,6 @@ __all__ = [
     "KINEMATICS",
     "LINEAR_SOLVERS",
     "MATERIAL_MODELS",
-    "SURFACES",
     "Body",
     "BoundaryCondition",
     "Case",
@@ -40,9 +39,6 @@ __all__ = [
 KINEMATICS = ("small", "finite")
 MATERIAL_MODELS = ("linear_elastic", "neo_hookean")
 LINEAR_SOLVERS = ("auto", "superlu", "pyamg", "pardiso")
-#: contact surface definitions (docs/methods/contact.md) and the boundary quadrature each one
-#: integrates on
-SURFACES = {"facets": "facets", "nurbs_fe": "nurbs", "nurbs_fit": "nurbs"}
 #: pattern of a body name
 BODY_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 #: load steps when the case file does not say

@@ -29,10 +29,9 @@ from cgfem.contact.pair import MAX_GAP_H, ContactPair, slave_gradients
 from cgfem.contact.rule import segmented_rule
 from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface
 from cgfem.embedding.partition import SurfaceQuadrature
+from cgfem.definitions import NURBS_DEFINITIONS, surface_definition
 from cgfem.errors import InputError
 from cgfem.geometry.solid import Solid
-
-DEFINITIONS = ("facets", "nurbs_fe", "nurbs_fit")
 
 
 def patch_ids(solid_names: tuple[str, ...], wanted: tuple[str, ...] | None) -> np.ndarray:
@@ -56,22 +55,22 @@ def build_pair(name: str, spec: ContactSpec, index: dict[str, int], models: list
     """The pair ``spec`` between ``models[index[spec.slave]]`` and the master's model;
     ``E``: Young's modulus of the slave (Pa), for the penalty ``kappa E / h``; ``E_master``
     (default ``E``): the master's, which scales its fit constraint (``nurbs_fit``)."""
-    if definition not in DEFINITIONS:
-        raise NotImplementedError(f"contact with the {definition!r} surface definition")
+    kind = surface_definition(definition)
     s_model, m_model = models[index[spec.slave]], models[index[spec.master]]
     s_solid, m_solid = solids[spec.slave], solids[spec.master]
     s_emb, m_emb = s_model.embedding, m_model.embedding
     s_ids = patch_ids(tuple(p.name for p in s_solid.patches), spec.slave_patches)
     m_ids = patch_ids(tuple(p.name for p in m_solid.patches), spec.master_patches)
-    if spec.rule == "segmented" and definition == "facets":
-        raise InputError("rule", "'segmented' needs a NURBS surface definition (nurbs_fe, nurbs_fit), not facets")
+    if spec.rule == "segmented" and not kind.exact_surface:
+        raise InputError("rule", f"'segmented' needs a NURBS surface definition ({', '.join(NURBS_DEFINITIONS)}), "
+                                 f"not {definition}")
 
     slave_surface = None
-    if definition == "nurbs_fe":
+    if kind.exact_surface and not kind.fitted:          # nurbs_fe
         rule = _slave_rule(spec, s_solid, s_emb, m_emb, s_ids)
         frames = NurbsFeSurface(s_solid, s_model.space, rule, s_ids).slave_frames(rule)
         master = NurbsFeSurface(m_solid, m_model.space, m_emb.surface, m_ids)
-    elif definition == "nurbs_fit":
+    elif kind.fitted:                                   # nurbs_fit
         E_m = E if E_master is None else E_master
         s_fits = build_fits(s_solid, s_emb.surface, s_model.space, s_ids, spec.fit)
         slave_surface = FittedSurface(index[spec.slave], s_fits, s_emb.surface, E / s_model.space.h)

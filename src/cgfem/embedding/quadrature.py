@@ -30,7 +30,7 @@ from functools import cached_property
 
 import numpy as np
 
-from cgfem.case.model import SURFACES
+from cgfem.definitions import DEFINITIONS, surface_definition
 from cgfem.embedding.facets import FacetSurface, facet_embedding_parts, facet_surface_degree, volume_surface_degree
 from cgfem.embedding.grid import CartesianGrid
 from cgfem.embedding.columns import DEFAULT_DEGREE, ColumnRules, LineHits, check_degree, column_rules, n_gauss
@@ -46,7 +46,7 @@ from cgfem.quadrature_rules import tensor_gauss
 
 OUTSIDE, INSIDE, CUT = 0, 1, 2
 #: the boundary quadratures :func:`embed` builds (the one of each contact surface
-#: definition is :data:`cgfem.case.model.SURFACES`)
+#: definition is its :attr:`~cgfem.definitions.SurfaceDefinition.quadrature`)
 SURFACE_DEFINITIONS = ("nurbs", "facets")
 
 
@@ -162,9 +162,9 @@ def embed(solid: Solid, grid: CartesianGrid, surface: str = "nurbs", tol: float 
     points : Gauss points per direction of the moment-fitted fallback rule; at least and by
         default ``degree + 1`` (exact for degree < points per variable)
     index : the solid's surface index (built if None)
-    definition : the contact surface definition the embedding serves (a key of
-        :data:`cgfem.case.model.SURFACES`, whose value must be ``surface``), by default
-        ``facets`` or ``nurbs_fe``
+    definition : the contact surface definition the embedding serves (a name of
+        :data:`cgfem.definitions.DEFINITIONS`, whose quadrature must be ``surface``), by
+        default the first one on ``surface`` (``facets`` or ``nurbs_fe``)
     degree : polynomial degree in each variable that the volume rule and the reduced
         boundary rule integrate exactly: 2 (trilinear elements, the default) or 4
         (triquadratic); any integer in ``1..MAX_DEGREE`` is accepted. Cut elements get at
@@ -182,10 +182,9 @@ def embed(solid: Solid, grid: CartesianGrid, surface: str = "nurbs", tol: float 
         raise ValueError(f"the fitted rule needs at least degree + 1 = {degree + 1} points per direction "
                          f"to be exact for degree {degree}, got {points}")
     if definition is None:
-        definition = "facets" if surface == "facets" else "nurbs_fe"
-    if SURFACES.get(definition) != surface:
-        raise ValueError(f"surface definition {definition!r} does not use the {surface!r} quadrature "
-                         f"(known: {SURFACES})")
+        definition = next(d.name for d in DEFINITIONS.values() if d.quadrature == surface)
+    if surface_definition(definition).quadrature != surface:
+        raise ValueError(f"surface definition {definition!r} does not use the {surface!r} quadrature")
     index = SurfaceIndex.build(solid) if index is None else index
     names = tuple(p.name for p in solid.patches)
     if surface == "facets":

@@ -27,14 +27,15 @@ from typing import Sequence
 import numpy as np
 
 from cgfem.atomic import write_text_atomic
+from cgfem.definitions import NAMES, NURBS_DEFINITIONS
 from cgfem.report.convergence import OPTIMAL_RATE, rates
 from cgfem.report.energy import TOTAL, read_error_tables
 from cgfem.report.runs import Run, load_runs
 from cgfem.report.validation import Reference, final_error, load_references, von_mises_error
 
-#: the definitions in the order the claims list them
-NURBS = ("nurbs_fe", "nurbs_fit")
-SURFACES = ("facets",) + NURBS
+#: the definitions in the order the claims list them (:mod:`cgfem.definitions`)
+NURBS = NURBS_DEFINITIONS
+SURFACES = NAMES
 
 
 def present(surfaces, among: tuple[str, ...] = SURFACES) -> tuple[str, ...]:
