@@ -1,7 +1,7 @@
 """The paper's chain of two steel links (config/cases/chain2_steel.yaml), its first load step
 (the pulled caps move 1 mm) at level 0, with both surface definitions: the step converges,
 the contact force balances the reactions of both links exactly, and Newton converges
-quadratically at the end of its first solve (the order of Newton's map along the directions
+quadratically at the end of its first solve, with trilinear and with triquadratic hexahedra (the order of Newton's map along the directions
 of its last iterates, as in ``test_newton_order.py``: with the onset limit nurbs_fe's
 residuals end 2.8e-3, 2.1e-5, 7.1e-8, 8.2e-15 of the first, which read 1.16 from the last
 three above 1e-11)."""
@@ -26,15 +26,17 @@ pytestmark = pytest.mark.slow
 CASE = CASES / "chain2_steel.yaml"
 
 
-@pytest.mark.parametrize("surface", ["nurbs_fe", "facets"])
-def test_first_step_of_the_steel_chain(tmp_path, monkeypatch, surface):
+@pytest.mark.parametrize("surface, order", [("nurbs_fe", 1), ("facets", 1), ("nurbs_fe", 2),
+                                            pytest.param("facets", 2, marks=pytest.mark.long),
+                                            pytest.param("nurbs_fit", 2, marks=pytest.mark.long)])
+def test_first_step_of_the_steel_chain(tmp_path, monkeypatch, surface, order):
     solves = record_errors(monkeypatch)
     data = parse_yaml(CASE.read_text())
     data["steps"] = 1
     pulled = data["boundary"][1]
     assert pulled["body"] == "link_b" and pulled["components"]["y"] == 0.005
     pulled["components"]["y"] = 0.001
-    status = run_case(parse_case(data, CASE.parent), 0, surface, tmp_path)
+    status = run_case(parse_case(data, CASE.parent), 0, surface, tmp_path, order=order)
     assert status.status == "converged"
     step = json.loads((tmp_path / "summary.json").read_text())["steps"][-1]
     pulled_r = np.asarray(step["reactions"]["link_b/cap_a+cap_b"])

@@ -224,7 +224,7 @@ def test_hits_that_keep_changing_piece_are_held(definition):
     both = active[-1] & active[-2]
     # at u1 the held hits keep u0's piece, on its extension, exactly on their ray
     pair.begin_pass(increment=False)                           # a later pass: still held
-    x = pair._slave(u1[:n_s])[1]
+    x = pair._slave(u1[:n_s])
     hits = pair.search(*np.split(u1, [n_s]))[1]
     np.testing.assert_array_equal(_master_key(hits)[moving], keys[-1][moving])
     mp = pair.surface.evaluate(u1[n_s:], hits.piece[moving], hits.theta[moving], second=False,

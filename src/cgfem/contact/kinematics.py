@@ -89,9 +89,13 @@ class SlaveState:
 
 def slave_state(frames: SlaveFrames, U1: np.ndarray) -> SlaveState:
     """Current slave geometry from the nodal displacements ``U1`` (n, A, 3)."""
-    x = frames.X + np.einsum("pa,pak->pk", frames.phi, U1)
-    a = frames.A + np.einsum("pa,pak->pk", frames.ca, U1)
-    b = frames.B + np.einsum("pa,pak->pk", frames.cb, U1)
+    return state_of(frames.X + np.einsum("pa,pak->pk", frames.phi, U1),
+                    frames.A + np.einsum("pa,pak->pk", frames.ca, U1),
+                    frames.B + np.einsum("pa,pak->pk", frames.cb, U1))
+
+
+def state_of(x: np.ndarray, a: np.ndarray, b: np.ndarray) -> SlaveState:
+    """The slave geometry of points at ``x`` with current tangents ``a``, ``b`` (n, 3 each)."""
     m = np.cross(a, b)
     r = np.linalg.norm(m, axis=1)
     return SlaveState(x, a, b, m, m / r[:, None], r)

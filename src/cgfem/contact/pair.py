@@ -54,8 +54,8 @@ from scipy.spatial import cKDTree
 from threadpoolctl import ThreadpoolController
 
 from cgfem.contact import _ray_kernels as _rk
-from cgfem.contact.kinematics import (SlaveFrames, area_weight, gap_derivatives, gap_gradient_direction,
-                                      slave_state)
+from cgfem.contact.kinematics import (SlaveFrames, SlaveState, area_weight, gap_derivatives,
+                                      gap_gradient_direction, state_of)
 from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface, RayHits, shape_derivatives
 
 #: slave points whose (D, D) tangents (D = 48 for NURBS+FE and facets with trilinear
@@ -181,6 +181,7 @@ class ContactPair:
 
     def __post_init__(self) -> None:
         self.state = ContactState(np.zeros(self.frames.size))
+        self._maps = None
 
     @property
     def n_points(self) -> int:
@@ -192,14 +193,28 @@ class ContactPair:
         return self.slave_space.element.lebesgue if self.slave_surface is None else self.slave_surface.lebesgue
 
     # -- kinematics ------------------------------------------------------------------------
-    def _slave(self, u_s: np.ndarray):
-        U1 = u_s.reshape(-1, 3)[self.frames.nodes]
-        return U1, slave_state(self.frames, U1)
+    def _slave(self, u_s: np.ndarray) -> SlaveState:
+        """The current geometry of every slave point from the kinematic vector ``u_s``: the
+        sparse products of :meth:`_slave_maps` (the same sums as :func:`slave_state`)."""
+        if self._maps is None or self._maps[0].shape[1] != u_s.size // 3:
+            self._maps = self._slave_maps(u_s.size // 3)
+        U = u_s.reshape(-1, 3)
+        f = self.frames
+        return state_of(f.X + self._maps[0] @ U, f.A + self._maps[1] @ U, f.B + self._maps[2] @ U)
+
+    def _slave_maps(self, n_nodes: int) -> tuple[sp.csr_matrix, ...]:
+        """``phi``, ``ca`` and ``cb`` of the slave points as sparse (n_points, n_nodes) matrices
+        (a point's repeated padding nodes summed, their coefficients being zero)."""
+        nodes = self.frames.nodes
+        k = nodes.shape[1]
+        indptr = np.arange(0, k * nodes.shape[0] + 1, k)
+        return tuple(sp.csr_matrix((c.ravel(), nodes.ravel(), indptr), shape=(nodes.shape[0], n_nodes))
+                     for c in (self.frames.phi, self.frames.ca, self.frames.cb))
 
     def search(self, u_s: np.ndarray, u_m: np.ndarray) -> tuple:
         """Current slave geometry (:class:`SlaveState`) and its master hits (the previous
         pairing first), searched for the candidate points only (:meth:`candidates`)."""
-        st = self._slave(u_s)[1]
+        st = self._slave(u_s)
         rows, near = self.candidates(u_s, u_m, st.x)
         previous = None if self.state.hits is None else self.state.hits.select(rows)
         held = self.state.piece_held
@@ -244,7 +259,7 @@ class ContactPair:
         if recovered is None:
             self.state.p_N = np.zeros(self.n_points)
             return
-        st = self._slave(u_s)[1]
+        st = self._slave(u_s)
         conn = self.slave_space.connectivity[self.frames.slot]
         if self.slave_surface is None:      # the points' own FE interpolation
             N = self.frames.phi

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
+import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from cgfem.contact import _ray_kernels as _rk
@@ -329,7 +330,13 @@ element of its space)."""
         for pid in np.unique(self.seed_piece):
             rows = self.seed_piece == pid
             self._seed_X[rows] = solid.patches[pid].surface.evaluate(self.seed_theta[rows])
-        self._seed_N = shape_derivatives(self._seed_xi, self.h, space.element)[0]
+        N = shape_derivatives(self._seed_xi, self.h, space.element)[0]
+        k = N.shape[1]
+        #: the seeds' shape functions as a sparse (n_seeds, n_nodes) matrix: their positions
+        #: are one sparse product per search (gathering (n_seeds, n_nodes, 3) values was a
+        #: tenth of a run's time at order 2)
+        self._seed_S = sp.csr_matrix((N.ravel(), space.connectivity[self._seed_slot].ravel(),
+                                      np.arange(0, k * N.shape[0] + 1, k)), shape=(N.shape[0], space.n_nodes))
         self._centres = space.centres()
         self._layout, self._knots, self._control = pack_patches([p.surface for p in solid.patches])
 
@@ -431,9 +438,10 @@ element of its space)."""
 
     def _seed_positions(self, u: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
         """Current positions (n_seeds, 3) of the seeds (of seeds ``rows`` only)."""
-        rows = slice(None) if rows is None else rows
-        U = element_values(self.space, u, self._seed_slot[rows])
-        return self._seed_X[rows] + np.einsum("pa,pak->pk", self._seed_N[rows], U)
+        U = np.asarray(u, float).reshape(-1, 3)
+        if rows is None:
+            return self._seed_X + self._seed_S @ U
+        return self._seed_X[rows] + self._seed_S[rows] @ U
 
 
 class FacetSurface:

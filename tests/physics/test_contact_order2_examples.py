@@ -1,0 +1,58 @@
+"""The paper's chain examples with triquadratic hexahedra (``--order 2``): every example at
+levels 0 and 1 with every surface definition converges, and its contact forces balance the
+links' support reactions (chain3: the middle link, held by contact alone, carries two equal
+contact forces). Whole runs of minutes each: marked ``long``
+(``python3 -m pytest -m long``)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from cgfem.case import load_case
+from cgfem.definitions import NAMES
+from cgfem.run import run_case
+from tests.support.paths import CASES
+
+pytestmark = pytest.mark.long
+
+#: the pulled link's caps and the clamped link's caps (their displacement entries)
+PULLED, CLAMPED = "link_b/cap_a+cap_b", "link_a/cap_a+cap_b"
+
+
+def _run(tmp_path, example: str, level: int, surface: str) -> dict:
+    status = run_case(load_case(CASES / f"{example}.yaml"), level, surface, tmp_path, order=2)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert status.status == "converged", summary.get("message")
+    assert summary["order"] == 2
+    return summary
+
+
+@pytest.mark.parametrize("surface", NAMES)
+@pytest.mark.parametrize("level", [0, 1])
+@pytest.mark.parametrize("example", ["chain2_steel", "chain2_rubber"])
+def test_two_link_chains_converge_and_balance(tmp_path, example, level, surface):
+    step = _run(tmp_path, example, level, surface)["steps"][-1]
+    force = np.asarray(step["contact"]["force"])             # link_a (master) on link_b (slave)
+    scale = np.linalg.norm(force)
+    assert step["reactions"][PULLED][1] > 0.0 and scale > 0.0
+    assert np.linalg.norm(np.asarray(step["reactions"][PULLED]) + force) <= 1e-8 * scale
+    assert np.linalg.norm(np.asarray(step["reactions"][CLAMPED]) - force) <= 1e-8 * scale
+
+
+@pytest.mark.parametrize("surface", NAMES)
+@pytest.mark.parametrize("level", [0, 1])
+def test_three_link_chain_converges_and_the_middle_link_balances(tmp_path, level, surface):
+    step = _run(tmp_path, "chain3", level, surface)["steps"][-1]
+    pairs = step["contact"]["pairs"]
+    # link_a (master) on link_c (slave), and link_c (master) on link_b (slave): on the middle
+    # link the first and minus the second, whose sum vanishes
+    on_c_from_a = np.asarray(pairs["link_c/link_a"]["force"])
+    on_b_from_c = np.asarray(pairs["link_b/link_c"]["force"])
+    scale = np.linalg.norm(on_c_from_a)
+    assert scale > 0.0 and step["reactions"][PULLED][1] > 0.0
+    assert np.linalg.norm(on_c_from_a - on_b_from_c) <= 1e-8 * scale
+    assert np.linalg.norm(np.asarray(step["reactions"][PULLED]) + on_b_from_c) <= 1e-8 * scale
+    assert np.linalg.norm(np.asarray(step["reactions"][CLAMPED]) - on_c_from_a) <= 1e-8 * scale
