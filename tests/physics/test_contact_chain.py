@@ -15,6 +15,7 @@ import pytest
 
 
 from cgfem.case import parse_case, parse_yaml
+from cgfem.definitions import NAMES
 from cgfem.run import run_case
 from tests.support.newton import record_errors
 from tests.support.paths import CASES
@@ -26,9 +27,8 @@ pytestmark = pytest.mark.slow
 CASE = CASES / "chain2_steel.yaml"
 
 
-@pytest.mark.parametrize("surface, order", [("nurbs_fe", 1), ("facets", 1), ("nurbs_fe", 2),
-                                            pytest.param("facets", 2, marks=pytest.mark.long),
-                                            pytest.param("nurbs_fit", 2, marks=pytest.mark.long)])
+@pytest.mark.parametrize("surface, order", [("nurbs_fe", 1), ("facets", 1),
+                                            *(pytest.param(s, 2, marks=pytest.mark.long) for s in NAMES)])
 def test_first_step_of_the_steel_chain(tmp_path, monkeypatch, surface, order):
     solves = record_errors(monkeypatch)
     data = parse_yaml(CASE.read_text())

@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import pytest
 
-from tests.support.hertz_setup import INDENTER, SURFACES, HertzResult, assert_force_balance, solve_all
+from tests.support.hertz_setup import INDENTER, SURFACES, HertzResult, assert_force_balance, solve, solve_all
 
 #: every test here solves a whole problem
 pytestmark = pytest.mark.slow
@@ -104,3 +104,13 @@ def test_nurbs_fe_peak_pressure_closer_than_facets(runs, level):
     nurbs, facets = runs[(level, "nurbs_fe")], runs[(level, "facets")]
     assert abs(nurbs.error_vs_hertz()[1]) < abs(facets.error_vs_hertz()[1])
     assert abs(nurbs.error_vs_reference()[1]) < abs(facets.error_vs_reference()[1])
+
+
+@pytest.mark.long
+def test_order_2_matches_the_converged_solution_at_level_1(tmp_path):
+    """Triquadratic hexahedra, nurbs_fe, level 1: half-width and fitted peak pressure within
+    3 % of the converged solution, and the supports carry the contact force."""
+    run = solve(INDENTER, 1, "nurbs_fe", tmp_path, order=2)
+    assert_force_balance(run)
+    a, p0 = run.error_vs_reference()
+    assert abs(a) < 0.03 and abs(p0) < 0.03, (a, p0)

@@ -213,9 +213,10 @@ def measure(setup: Setup, summary: dict, points: dict) -> HertzResult:
 
 
 def solve(setup: Setup, level: int, surface: str, out: Path,
-          cyl_offset: tuple[float, float, float] | None = None) -> HertzResult:
-    """Run ``setup`` at ``level`` with ``surface`` into ``out`` and measure it."""
-    status = run_case(parse_case(setup.case(cyl_offset), out), level, surface, out)
+          cyl_offset: tuple[float, float, float] | None = None, order: int = 1) -> HertzResult:
+    """Run ``setup`` at ``level`` with ``surface`` and the hexahedra of ``order`` into
+    ``out`` and measure it."""
+    status = run_case(parse_case(setup.case(cyl_offset), out), level, surface, out, order=order)
     summary = json.loads((out / "summary.json").read_text())
     mesh = meshio.read(out / f"contact_{len(summary['steps']):03d}.vtu")
     result = measure(setup, summary, {**mesh.point_data, "x": mesh.points})
