@@ -30,9 +30,15 @@ def _run(tmp_path, example: str, level: int, surface: str) -> dict:
     return summary
 
 
-@pytest.mark.parametrize("surface", NAMES)
-@pytest.mark.parametrize("level", [0, 1])
-@pytest.mark.parametrize("example", ["chain2_steel", "chain2_rubber"])
+#: chain2_rubber with facets at order 2, level 0: the outer loop diverges at load factor 0.51
+#: (docs/validation.md, "Contact with triquadratic hexahedra")
+RUBBER_FACETS = pytest.mark.xfail(strict=True, reason="outer loop diverges at load factor 0.51")
+TWO_LINK_RUNS = [pytest.param(example, level, surface,
+                              marks=RUBBER_FACETS if (example, level, surface) == ("chain2_rubber", 0, "facets") else ())
+                 for example in ("chain2_steel", "chain2_rubber") for level in (0, 1) for surface in NAMES]
+
+
+@pytest.mark.parametrize("example, level, surface", TWO_LINK_RUNS)
 def test_two_link_chains_converge_and_balance(tmp_path, example, level, surface):
     step = _run(tmp_path, example, level, surface)["steps"][-1]
     force = np.asarray(step["contact"]["force"])             # link_a (master) on link_b (slave)
