@@ -351,6 +351,14 @@ class ContactPair:
                     st.held_active[hold] = active[hold]
         st.active, st.hits, st.natural = active, hits, natural
 
+    def active_centroid(self, u_s: np.ndarray) -> np.ndarray | None:
+        """The mean current position (3,) of the points active at the last linearization
+        point (from the kinematic vector ``u_s``), None if none is."""
+        active = self.state.active
+        if active is None or not active.any():
+            return None
+        return self._slave(u_s)[1].x[active].mean(axis=0)
+
     def gaps(self, u_s: np.ndarray, u_m: np.ndarray) -> np.ndarray:
         """Every slave point's gap at ``(u_s, u_m)`` (n,), NaN without a master hit; the
         active set and pairing are not recorded."""
