@@ -238,11 +238,11 @@ class ContactSet:
         return [(b, b.fit.T @ u[b.z].reshape(-1, 3)) for b in self.blocks]
 
     def held_at(self, u: np.ndarray) -> list[tuple[int, int, np.ndarray]]:
-        """Per pair with active points: its slave and master bodies and the mean current
-        position (3,) of its active points (:meth:`ContactPair.active_centroid`)."""
+        """Per pair with master hits: its slave and master bodies and where it holds the
+        slave (current position (3,), :meth:`ContactPair.held_point`)."""
         out = []
         for k, p in enumerate(self.pairs):
-            centre = p.active_centroid(self._split(u, k)[0])
+            centre = p.held_point(self._split(u, k)[0])
             if centre is not None:
                 out.append((p.slave, p.master, centre))
         return out

@@ -127,8 +127,9 @@ class System:
     def turned_floating(self, u: np.ndarray) -> str:
         """Why the state ``u`` is not a small-strain solution, empty if it is: a floating
         body (small strain, held at two or more contacts) whose linearized rotation stretches a
-        chord between its contacts by more than ``rotation_stretch`` of the chord's elastic
-        stretch (:func:`~cgfem.solve.floating.rotation_stretch`)."""
+        chord between its contacts (where each pair holds it, or would: its nearest point
+        where none is active) by more than ``rotation_stretch`` of the chord's elastic stretch
+        (:func:`~cgfem.solve.floating.rotation_stretch`)."""
         ratio = self.policy.rotation_stretch
         if not self.contact or not self.floating.bodies or not np.isfinite(ratio) \
                 or any(b.finite for b in self.bodies):
