@@ -4,6 +4,8 @@ one-body solves; in finite strain the tangent is the derivative of the residual.
 
 from __future__ import annotations
 
+import math
+
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +16,7 @@ import scipy.sparse.linalg as spla
 from cgfem.case.load import parse_case
 from cgfem.run import build_models
 from cgfem.solve.static import solve_static
-from cgfem.solve.floating import FloatingBodies, free_rigid_modes, shift_factor
+from cgfem.solve.floating import FloatingBodies, free_rigid_modes, rotation_stretch, shift_factor
 from cgfem.solve.policy import SolverPolicy
 from cgfem.solve.system import System
 
@@ -171,20 +173,26 @@ def test_fading_shift_restores_fast_convergence_on_a_soft_mode():
     np.testing.assert_allclose(fading.u, [f / k], rtol=1e-12)
 
 
-def test_step_limit_of_a_floating_body_adapts_its_shift():
-    """A Newton step moving a body held by contact alone by 10 h is scaled to 1 h
-    (the policy's floating_step), and the body's tangent shift is raised 10-fold for the next iterations
-    (a Levenberg-Marquardt damping of its soft rigid motions); steps within the limit are
-    kept as they are and lower the damping by damping_decay, down to 1; near convergence
-    (residual below damping_above of the increment's largest) a limited step lowers it too."""
-    policy = SolverPolicy()
-    FLOATING_STEP, DAMPING_DECAY, DAMPING_ABOVE = policy.floating_step, policy.damping_decay, policy.damping_above
+def free_box():
+    """A box without conditions (six free rigid motions) at level 0, h = 0.25 m."""
     data = {"name": "free", "kinematics": "small", "steps": 1,
             "bodies": {"box": {"geometry": {"builder": "box", "min": [0, 0, 0], "max": [1.0, 0.6, 0.5]},
                                "material": {"model": "linear_elastic", "E": 1e9, "nu": 0.3},
                                "grid": {"h0": 0.25, "offset": [0.13, 0.29, 0.41]}}},
             "boundary": []}
-    body = build_models(parse_case(data, Path(".")), 0, "nurbs_fe", lambda message: None)[0][0]
+    return build_models(parse_case(data, Path(".")), 0, "nurbs_fe", lambda message: None)[0][0]
+
+
+def test_step_limit_of_a_floating_body_adapts_its_shift():
+    """A Newton step moving a body held by contact alone by 10 h is scaled to 1 h
+    (the policy's floating_step), and the body's tangent shift is raised 10-fold for the next iterations
+    (a Levenberg-Marquardt damping of its soft rigid motions); steps within the limit are
+    kept as they are and lower the damping by damping_decay, down to 1; near convergence
+    (residual below damping_above of the increment's largest) a limited step lowers it too.
+    The turn limit (floating_turn, off here) is tested by the next test."""
+    policy = SolverPolicy(floating_turn=math.inf)
+    FLOATING_STEP, DAMPING_DECAY, DAMPING_ABOVE = policy.floating_step, policy.damping_decay, policy.damping_above
+    body = free_box()
     floating = FloatingBodies(np.array([0, body.n_dofs]), [body.space.h], [body.space.coordinates], policy)
     floating.bodies = [0]
     h = body.space.h
@@ -202,3 +210,43 @@ def test_step_limit_of_a_floating_body_adapts_its_shift():
     floating.damping, floating._fading = 8.0, 0.5 * DAMPING_ABOVE
     np.testing.assert_allclose(floating.limit(du), 0.1 * du, rtol=1e-14)
     assert floating.damping == pytest.approx(8.0 * DAMPING_DECAY)
+
+
+def test_step_limit_of_a_floating_body_bounds_its_turn():
+    """Where ``floating_turn`` times the body's radius (the RMS distance of its nodes to their
+    centroid) is below ``floating_step`` element sizes, a floating body's step is limited to
+    that: a rigid turn of 1 rad about z is scaled to about floating_turn rad, so that no node
+    moves by more than floating_turn times the radius."""
+    policy = SolverPolicy()
+    body = free_box()
+    x = body.space.coordinates
+    floating = FloatingBodies(np.array([0, body.n_dofs]), [body.space.h], [x], policy)
+    floating.bodies = [0]
+    radius = float(np.sqrt(((x - x.mean(axis=0)) ** 2).sum(axis=1).mean()))
+    assert floating.radius[0] == pytest.approx(radius)
+    assert policy.floating_turn * radius < policy.floating_step * body.space.h
+    du = np.cross([0.0, 0.0, 1.0], x - x.mean(axis=0)).ravel()      # a linearized turn of 1 rad
+    limited = floating.limit(du)
+    assert np.abs(limited).max() == pytest.approx(policy.floating_turn * radius, rel=1e-12)
+    np.testing.assert_allclose(limited, np.abs(limited).max() / np.abs(du).max() * du, rtol=1e-14)
+
+
+def test_rotation_stretch_of_a_turned_and_strained_body():
+    """A body turned (linearized) by omega = 0.05 rad about z and strained by 1e-3 along y,
+    held at two points 0.4 m apart along y: the turn stretches their chord by
+    |omega x d|^2 / (2 |d|) = 5e-4 m, which an exact turn would not, the strain by 4e-4 m;
+    both read to 1 % (the points' reference positions are recovered to first order)."""
+    body = free_box()
+    x = body.space.coordinates
+    c = x.mean(axis=0)
+    omega, strain = np.array([0.0, 0.0, 0.05]), 1e-3
+
+    def displacement(X):
+        r = X - c
+        return np.cross(omega, r) + strain * r[:, 1:2] * np.array([0.0, 1.0, 0.0])
+    u = displacement(x).ravel()
+    X = np.array([[0.5, 0.1, 0.25], [0.5, 0.5, 0.25]])
+    turn, spurious, elastic = rotation_stretch(body.space, u, X + displacement(X))
+    assert turn == pytest.approx(0.05, rel=1e-10)
+    assert spurious == pytest.approx((0.05 * 0.4) ** 2 / 0.8, rel=1e-2)
+    assert elastic == pytest.approx(strain * 0.4, rel=1e-2)

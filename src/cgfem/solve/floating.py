@@ -5,9 +5,12 @@ planar example's lower block in two) has a singular tangent until contact holds 
 along a frictionless spin always. :class:`FloatingBodies` finds such bodies from their first
 tangent, adds a fading diagonal shift to the matrix Newton solves (never to the residual, so
 the converged state is that of the unstabilized equations), limits Newton's step so that no
-node of such a body moves more than ``floating_step`` element sizes, and adapts the shift to
-how often steps had to be limited (Levenberg-Marquardt). Measurements and reasons:
-``docs/methods/contact.md``, "Bodies held by contact alone".
+node of such a body moves more than ``floating_step`` element sizes nor turns it by more than
+about ``floating_turn`` radians, and adapts the shift to how often steps had to be limited
+(Levenberg-Marquardt). In small strain it also checks a
+converged state for a floating body turned so far that its linearized rotation, strain-free
+but not length-preserving, stretches it between its contacts (:func:`rotation_stretch`).
+Measurements and reasons: ``docs/methods/contact.md``, "Bodies held by contact alone".
 """
 
 from __future__ import annotations
@@ -31,6 +34,59 @@ def free_rigid_modes(coordinates: np.ndarray, K: sp.spmatrix, free_mode: float) 
     return int(np.sum(np.linalg.eigvalsh(0.5 * (S + S.T)) < free_mode * scale))
 
 
+def rigid_fit(coordinates: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rigid motion nearest (least squares over the nodes) to a body's nodal displacement
+    ``u`` (n, 3) at its nodes ``coordinates`` (n, 3), linearized: ``u ~ t + omega x (X - c)``.
+    Returns the translation ``t`` (3,) (m), the rotation vector ``omega`` (3,) (rad) and the
+    centroid ``c`` (3,) (m) of the nodes."""
+    P = rigid_body_modes(coordinates)
+    c = np.asarray(coordinates, float).mean(axis=0)
+    r = np.asarray(coordinates, float) - c
+    scale = max(float(np.sqrt((r ** 2).sum(axis=1).mean())), np.finfo(float).tiny)
+    a = np.linalg.lstsq(P, np.asarray(u, float).ravel(), rcond=None)[0]
+    return a[:3], a[3:] / scale, c
+
+
+def spurious_stretch(omega: np.ndarray, chord: np.ndarray) -> float:
+    """How much longer a linearized rotation ``omega`` (3,) (rad) makes a chord ``chord`` (3,)
+    (m) than the rotation itself would: ``|omega x d|^2 / (2 |d|)`` (m), the second-order term
+    small strain drops (``X + omega x d`` has length ``|d| sqrt(1 + |omega x d|^2 / |d|^2)``)."""
+    d = float(np.linalg.norm(chord))
+    if not d > 0.0:
+        return 0.0
+    turned = np.cross(omega, chord)
+    return float(np.dot(turned, turned) / (2.0 * d))
+
+
+def rotation_stretch(space, u: np.ndarray, points: np.ndarray) -> tuple[float, float, float]:
+    """For a body (its FE ``space``, nodal displacement ``u`` (3 n,)) held at ``points`` (k, 3)
+    (current positions, one per contact, k >= 2): its rigid rotation ``|omega|`` (rad,
+    :func:`rigid_fit`), and over the chords between the points the largest
+    :func:`spurious_stretch` (m) with the elastic stretch of the same chord, the change of its
+    length by the displacement less the rigid motion (m). A point in no active element of the
+    body has no elastic displacement here."""
+    U = np.asarray(u, float).reshape(-1, 3)
+    t, omega, c = rigid_fit(space.coordinates, U)
+    x = np.asarray(points, float)
+    X = x - t - np.cross(omega, x - c)          # reference positions, to first order
+    slots, xi = space.locate(X)
+    elastic = np.zeros_like(X)
+    inside = slots >= 0
+    if inside.any():
+        elastic[inside] = space.interpolate(U, slots[inside], xi[inside]) - t \
+            - np.cross(omega, X[inside] - c)
+    worst, stretch = 0.0, 0.0
+    for a in range(len(X)):
+        for b in range(a + 1, len(X)):
+            d = X[b] - X[a]
+            spurious = spurious_stretch(omega, d)
+            if spurious >= worst:
+                worst = spurious
+                stretch = abs(float(np.dot(d, elastic[b] - elastic[a]))) / max(float(np.linalg.norm(d)),
+                                                                                np.finfo(float).tiny)
+    return float(np.linalg.norm(omega)), worst, stretch
+
+
 def shift_factor(norm: float, largest: float, floor: float = DEFAULT_POLICY.shift_floor) -> float:
     """``norm / largest`` kept in ``[floor, 1]`` (1 if ``largest`` is not positive)."""
     if not largest > 0.0:
@@ -50,6 +106,9 @@ class FloatingBodies:
                  policy: SolverPolicy = DEFAULT_POLICY):
         self.offsets = np.asarray(offsets, np.int64)
         self.h, self.coordinates, self.policy = list(h), coordinates, policy
+        #: per body, the RMS distance of its nodes to their centroid (m)
+        self.radius = [float(np.sqrt(((x - x.mean(axis=0)) ** 2).sum(axis=1).mean())) if len(x) else 0.0
+                       for x in coordinates]
         #: indices of the floating bodies (None before :meth:`detect`)
         self.bodies: list[int] | None = None
         #: per body, the rigid motions its own conditions leave free
@@ -99,8 +158,9 @@ class FloatingBodies:
     def limit(self, du: np.ndarray) -> np.ndarray:
         """The Newton step ``du`` scaled down (all of it: the bodies' equations are coupled)
         so that no node of a floating body moves by more than ``floating_step`` of its
-        element size; ``du`` itself if none does. A step shortened to a fraction ``f`` while
-        the residual is above ``damping_above`` of the increment's largest multiplies the
+        element size, nor more than ``floating_turn`` times its radius (:attr:`radius`: a
+        turn of that many radians); ``du`` itself if none does. A step shortened to a
+        fraction ``f`` while the residual is above ``damping_above`` of the increment's largest multiplies the
         shift of the next tangents by ``1 / f``; any other step by ``damping_decay``, within
         ``[1, damping_max]``. Records :attr:`stabilizing`."""
         p = self.policy
@@ -111,7 +171,7 @@ class FloatingBodies:
             if shift is not None:
                 self.stabilizing[i] = float(np.linalg.norm(self._scale * shift[a:b] * du[a:b]))
             move = float(np.abs(du[a:b]).max(initial=0.0))
-            allowed = p.floating_step * self.h[i]
+            allowed = min(p.floating_step * self.h[i], p.floating_turn * self.radius[i])
             if move > allowed:
                 factor = min(factor, allowed / move)
         raise_ = factor < 1.0 and self._fading >= p.damping_above

@@ -47,15 +47,20 @@ class IncrementFailure:
     """Why an increment failed: Newton's ``reason`` (``max_iterations``, ``line_search``,
     ``nan`` or ``linear_solver: ...``) in outer pass ``outer_pass``, its last residual over
     its reference ``residual``, after ``iterations`` Newton iterations; ``contact``: what the
-    contact set did at the last linearization point (empty without contact)."""
+    contact set did at the last linearization point (empty without contact). ``rejected``:
+    the outer loop ended but its state is no solution of the model (reason ``rejected``,
+    :meth:`~cgfem.solve.system.System.turned_floating`), and why."""
 
     reason: str
     outer_pass: int
     residual: float
     iterations: int
     contact: str = ""
+    rejected: str = ""
 
     def __str__(self) -> str:
+        if self.rejected:
+            return f"the state reached in outer pass {self.outer_pass} was rejected: {self.rejected}"
         why = f"; {self.contact}" if self.contact else ""
         return (f"Newton stopped on {self.reason} in outer pass {self.outer_pass} at |r|/ref = "
                 f"{self.residual:.2e} after {self.iterations} iterations{why}")
@@ -248,6 +253,11 @@ def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray 
         if changes[-1] <= options.outer_tol and settled:
             break
         following = acceleration.next(frozen, recovered)
+    rejected = system.turned_floating(u) if contact else ""
+    if rejected:
+        log(f"t={t:.4g}: state rejected: {rejected}")
+        return IncrementFailure("rejected", len(changes), 0.0, sum(len(h) - 1 for h in residuals),
+                                contact.changes(), rejected)
     extended, continuous = 0, 0.0
     if contact:
         r, extended = system.continuous_residual(u, t)

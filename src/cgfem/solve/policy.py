@@ -48,10 +48,18 @@ class SolverPolicy:
     shift_floor : the shift fades with ``|r| / max |r|`` of the increment down to this fraction.
     floating_step : largest nodal move of a floating body in one Newton step, in its element
         sizes ``h``.
+    floating_turn : largest nodal move of a floating body in one Newton step, in its radius
+        (the RMS distance of its nodes to their centroid): about the largest turn (rad) of a
+        step. A coarse grid's ``h`` lets a step turn a small body far (chain3 at level 0: 0.24
+        rad), and a linearized turn stretches the body (``rotation_stretch``).
     damping_decay, damping_above, damping_max : the Levenberg-Marquardt damping of the shift: a
         step limited to a fraction ``f`` at ``|r|`` above ``damping_above`` of the increment's
         largest multiplies the shift of the next tangents by ``1 / f``; any other step by
         ``damping_decay``; kept in ``[1, damping_max]`` (``damping_max = 1`` turns it off).
+    rotation_stretch : in small strain a converged state is rejected (the increment cut back)
+        where a floating body's linearized rotation stretches a chord between its contacts by
+        more than this fraction of the chord's elastic stretch (the rotation is strain-free
+        but not length-preserving); ``inf`` turns the check off.
 
     Contact onset (:class:`~cgfem.solve.onset.OnsetLimit`)
     -------------------------------------------------------
@@ -82,9 +90,11 @@ class SolverPolicy:
     floating_shift: float = 1e-8
     shift_floor: float = 1e-4
     floating_step: float = 1.0
+    floating_turn: float = 0.07
     damping_decay: float = 0.25
     damping_above: float = 1e-2
     damping_max: float = 1e6
+    rotation_stretch: float = 1.0
     onset_penetration: float = 0.1
     krylov_min_dofs: int = 100_000
     krylov_refresh: int = 40

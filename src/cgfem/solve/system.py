@@ -15,7 +15,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from cgfem.contact.assembly import ContactSet
-from cgfem.solve.floating import FloatingBodies
+from cgfem.solve.floating import FloatingBodies, rotation_stretch
 from cgfem.solve.items import Block, BodyItem
 from cgfem.solve.linear import rigid_body_modes
 from cgfem.solve.onset import OnsetLimit
@@ -123,6 +123,30 @@ class System:
         solve's ``first`` step, the contact-onset limit."""
         du = self.floating.limit(du)
         return self.onset.limit(start, du) if first else du
+
+    def turned_floating(self, u: np.ndarray) -> str:
+        """Why the state ``u`` is not a small-strain solution, empty if it is: a floating
+        body (small strain, held at two or more contacts) whose linearized rotation stretches a
+        chord between its contacts (where each pair holds it, or would: its nearest point
+        where none is active) by more than ``rotation_stretch`` of the chord's elastic stretch
+        (:func:`~cgfem.solve.floating.rotation_stretch`)."""
+        ratio = self.policy.rotation_stretch
+        if not self.contact or not self.floating.bodies or not np.isfinite(ratio) \
+                or any(b.finite for b in self.bodies):
+            return ""
+        held = self.contact.held_at(u)
+        for i in self.floating.bodies:
+            points = [x for s, m, x in held if i in (s, m)]
+            if len(points) < 2:
+                continue
+            a, b = self.offsets[i], self.offsets[i + 1]
+            body = self.bodies[i]
+            turn, spurious, elastic = rotation_stretch(body.space, u[a:b], np.array(points))
+            if spurious > ratio * elastic and spurious > 1e-9 * body.space.h:
+                return (f"{body.name} turned {turn:.3g} rad: its linearized rotation stretches it by "
+                        f"{spurious:.3g} m between its contacts, elastically {elastic:.3g} m "
+                        f"(more than rotation_stretch = {ratio:g} of it: beyond small strain)")
+        return ""
 
     def recover(self, u: np.ndarray) -> list[np.ndarray]:
         """Every body's nodal recovered stress (n_nodes, 3, 3) (Pa) at ``u``."""

@@ -1,0 +1,73 @@
+"""chain3 at level 0 with nurbs_fe at one grid offset where its middle link, held by contact
+alone, used to end slack (issue 34): offset set 1 of ``benchmarks/bench_offsets.py`` (seed
+2026). With the step limit of 1 h only, Newton's steps turned the link by 0.26, -0.61 and
+0.10 rad; a linearized turn is strain-free but stretches the link, here by 1.5 mm between
+its contacts against a pull of 0.5 mm, and the run reported "converged" with a pulled
+reaction of -5e-4 N. With the turn limit (``floating_turn``) it carries 17065 N (18681 N at
+the shipped offsets; 16.8-18.8 kN over bench_offsets' ten sets); without it the state check
+(``rotation_stretch``) rejects the slack states and the run fails, saying why."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+
+from cgfem.case import parse_case, parse_yaml
+from cgfem.run import run_case
+from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
+from tests.support.paths import CASES
+
+#: every test here solves a whole problem
+pytestmark = pytest.mark.slow
+
+CASE = CASES / "chain3.yaml"
+#: offset set 1 of bench_offsets --examples chain3 --seed 2026
+OFFSETS = {"link_a": [0.6905, 0.9227, 0.8889], "link_c": [0.2819, 0.7438, 0.1623],
+           "link_b": [0.7498, 0.5169, 0.5174]}
+#: the pulled reaction along y at the shipped offsets, level 0, nurbs_fe (N)
+SHIPPED = 18680.8
+
+
+def run_offset(tmp_path, policy: SolverPolicy):
+    data = parse_yaml(CASE.read_text())
+    for name, offset in OFFSETS.items():
+        data["bodies"][name]["grid"]["offset"] = offset
+    status = run_case(parse_case(data, CASE.parent), 0, "nurbs_fe", tmp_path, policy=policy)
+    return status, json.loads((tmp_path / "summary.json").read_text())
+
+
+def test_middle_link_carries_the_pull_at_a_grid_offset(tmp_path):
+    """Converged at full load, the pull within 12 % of the shipped offsets' (17065 N
+    measured, -8.7 %), and carried through the middle link: each end link's reaction balances
+    the contact force on it, and the two reactions balance each other."""
+    status, summary = run_offset(tmp_path, DEFAULT_POLICY)
+    assert status.status == "converged", status.message
+    step = summary["steps"][-1]
+    assert step["load_factor"] == 1.0
+    pulled = np.asarray(step["reactions"]["link_b/cap_a+cap_b"])
+    clamped = np.asarray(step["reactions"]["link_a/cap_a+cap_b"])
+    pairs = step["contact"]["pairs"]
+    on_b = np.asarray(pairs["link_b/link_c"]["force"])          # link_c (master) on link_b
+    on_c = np.asarray(pairs["link_c/link_a"]["force"])          # link_a (master) on link_c
+    assert abs(pulled[1] / SHIPPED - 1.0) <= 0.12, pulled
+    scale = np.linalg.norm(pulled)
+    assert np.linalg.norm(pulled + on_b) <= 1e-6 * scale        # link_b: support + contact = 0
+    assert np.linalg.norm(clamped - on_c) <= 1e-6 * scale       # link_a carries the reverse
+    assert np.linalg.norm(pulled + clamped) <= 1e-6 * scale     # link_c passes it on
+
+
+@pytest.mark.long
+def test_slack_chain_is_not_reported_converged(tmp_path):
+    """Without the turn limit Newton turns the middle link by 0.5-0.67 rad into stress-free
+    slack states (elastic stretch 1e-15 m against 1.5-2.9 mm of turn); the check rejects
+    each of them, and after its cut-backs the run fails with that reason (90 s)."""
+    status, summary = run_offset(tmp_path, dataclasses.replace(DEFAULT_POLICY, floating_turn=math.inf))
+    assert status.status == "failed"
+    assert "rejected: link_c turned" in status.message
+    # every step it kept is either before contact or loaded
+    for step in summary["steps"]:
+        assert step["reactions"]["link_b/cap_a+cap_b"][1] >= -1e-6
