@@ -148,7 +148,7 @@ def test_order_2_line_decides_claims_3_and_4_on_the_order_2_runs(tmp_path, facet
 
 
 def test_order_2_line_is_not_decided_without_its_runs(tmp_path):
-    chain2, chain3 = _order2_runs(tmp_path)
+    chain2, _ = _order2_runs(tmp_path)
     # no order-2 chain3 run: claim 3 holds, claim 4 cannot be decided
     claim = claim_order2(load_runs(chain2), [], reaction_level=0, pulled=PULLED, component=1,
                          von_mises_levels=[0], body="link_c")
@@ -170,8 +170,8 @@ def test_order_2_line_is_not_decided_without_its_runs(tmp_path):
 def test_claims_table_gains_the_order_2_line_and_keeps_the_four(tmp_path):
     """The four claims see the order-1 runs alone (order-2 ones among their summaries are left
     out); the fifth line sees the order-2 runs, with their distance to the references."""
-    from tests.unit.test_report import _error_rows
     from cgfem.report.energy import write_error_table
+    from tests.unit.test_report import _error_rows
 
     table = tmp_path / "errors.csv"
     write_error_table(_error_rows({"facets": 1.0, "nurbs_fe": 1.0, "nurbs_fit": 1.0}), table)
@@ -191,3 +191,21 @@ def test_claims_table_gains_the_order_2_line_and_keeps_the_four(tmp_path):
     assert "facets L0 o2 +0.00%" in found[4].distance and "nurbs_fe L0 o2 -20.00%" in found[4].distance
     assert "claim 4: no runs" in found[4].distance or "claim 4: no reference" in found[4].distance
     assert Run.load(chain2_o2[0]).order == 2 and Run.load(chain2_o1[0]).order == 1
+
+
+def test_bad_input_is_a_one_line_error(tmp_path):
+    paths = [str(p) for p in _chain2(tmp_path)]
+    with pytest.raises(ValueError, match=r"no reaction entry 'link_b/cap_a' \(it has link_a/cap_a\+cap_b, "):
+        figure("accuracy", paths, pulled="link_b/cap_a")
+    with pytest.raises(ValueError, match="component: must be one of x, y, z"):
+        figure("accuracy", paths, pulled=PULLED, component="w")
+
+
+def test_figures_are_written_whole(tmp_path):
+    from cgfem.report.style import save_figure
+
+    fig = figure("accuracy", [str(p) for p in _chain2(tmp_path)], pulled=PULLED)
+    save_figure(fig, tmp_path / "a.png", tmp_path / "a.pdf")
+    assert (tmp_path / "a.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (tmp_path / "a.pdf").read_bytes()[:5] == b"%PDF-"
+    assert not list(tmp_path.glob(".*.tmp"))               # no temporary left behind

@@ -40,6 +40,9 @@ def final_reaction(run: Run, key: str, component: int) -> float:
     step, or nan if the run stopped before the last load step (failed or interrupted)."""
     if run.failed or not run.n_steps:
         return float("nan")
+    if key not in run.steps[-1]["reactions"]:
+        raise ValueError(f"{run.folder}: no reaction entry {key!r} (it has "
+                         f"{', '.join(sorted(run.steps[-1]['reactions']))})")
     return float(run.reactions(key)[-1, component])
 
 
@@ -130,6 +133,8 @@ def fig_accuracy(inputs, pulled: str = "link_b/cap_a+cap_b", component: str = "y
     summaries, references = split_inputs(inputs)
     runs = load_runs(summaries)
     refs = load_references(references)
+    if component not in AXES:
+        raise ValueError(f"component: must be one of x, y, z (got {component!r})")
     c = AXES[component]
     rows = [case for case in cases if any(r.case == case for r in runs)] or list(cases[:1])
     fig, axes = new_figure(len(rows), 2, width=8.0, height=2.8)

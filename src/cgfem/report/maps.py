@@ -22,8 +22,7 @@ from matplotlib.colors import Normalize, TwoSlopeNorm
 from matplotlib.figure import Figure
 
 from cgfem.embedding.tessellate import keep_vertices
-from cgfem.report.runs import (ACTIVE, BODY, DISPLACEMENT, NORMAL, STRESS, VON_MISES, Run, load_runs,
-                               stress_component)
+from cgfem.report.runs import ACTIVE, BODY, DISPLACEMENT, NORMAL, STRESS, VON_MISES, Run, load_runs, stress_component
 from cgfem.report.style import new_figure
 
 if not os.environ.get("DISPLAY"):
