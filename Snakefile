@@ -1,5 +1,6 @@
 # The replication pipeline: every example x level x surface definition is solved
-# (results/runs/{case}/L{level}_{surface}/), the planar runs are measured against a
+# (results/runs/{case}/L{level}_{surface}/; the order-2 runs of examples.*.orders in
+# results/runs/{case}/L{level}_{surface}_o2/), the planar runs are measured against a
 # body-fitted reference, and every figure (paper_figures/) and the claims table
 # (results/claims.md) are drawn from the result files.
 #   snakemake --cores 2                                   # full run

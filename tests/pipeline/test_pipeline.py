@@ -16,7 +16,8 @@ from tests.support.paths import REPO
 
 pytest.importorskip("snakemake")
 
-FIGURES = ["fig09", "fig10", "fig13", "fig14", "fig15", "fig17", "newton", "timings", "geometry"]
+FIGURES = ["fig09", "fig10", "fig13", "fig14", "fig15", "fig17", "newton", "timings", "geometry",
+           "accuracy"]
 
 
 @pytest.fixture(scope="module")
@@ -45,19 +46,37 @@ def expected_runs(config: dict) -> int:
     return sum(len(e["levels"]) for e in config["examples"].values()) * len(config["surfaces"])
 
 
+def expected_order2_runs(config: dict, smoke: dict | None = None) -> set[str]:
+    """Run folders of the order-2 runs of ``config`` merged with ``smoke`` (snakemake merges
+    --configfile key by key)."""
+    runs = set()
+    for case, entry in config["examples"].items():
+        order2 = {**entry.get("orders", {}).get(2, {}),
+                  **((smoke or {}).get("examples", {}).get(case, {}).get("orders", {}).get(2, {}))}
+        for level in order2.get("levels", []):
+            for surface in order2.get("surfaces", (smoke or config)["surfaces"]):
+                runs.add(f"results/runs/{case}/L{level}_{surface}_o2")
+    return runs
+
+
 def test_smoke_plan_has_every_rule_once_per_job(workdir):
     config = yaml.safe_load((REPO / "config" / "smoke.yaml").read_text())
     jobs = planned_jobs(workdir, "--configfile", "config/smoke.yaml")
     n_planar = len(config["examples"]["planar"]["levels"]) * len(config["surfaces"])
     assert jobs == {"all": 1, "check_case": 4, "run_case": expected_runs(config), "planar_reference": 1,
-                    "planar_errors": n_planar, "claims": 1, **{f: 1 for f in FIGURES}}
+                    "run_case_order": 1, "planar_errors": n_planar, "claims": 1, **{f: 1 for f in FIGURES}}
     assert expected_runs(config) == 15                  # 5 example levels x 3 definitions
+    # one small order-2 run: the full configuration's order-2 levels do not leak into the smoke
+    # one through the merge of --configfile
+    full = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    assert expected_order2_runs(full, config) == {"results/runs/chain2_steel/L0_nurbs_fe_o2"}
 
 
 def test_full_plan_runs_every_example_level_and_definition(workdir):
     config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
     jobs = planned_jobs(workdir)
     assert jobs["run_case"] == expected_runs(config) == 36     # 12 example levels x 3
+    assert jobs["run_case_order"] == len(expected_order2_runs(config)) == 9   # the chains at level 0
     assert jobs["planar_errors"] == 12
     # the chains' references (copied from their gold files) and the figure drawn from them;
     # the smoke plan above has neither
@@ -69,10 +88,31 @@ def test_full_plan_runs_every_example_level_and_definition(workdir):
 
 def planned_runs(root: Path, *args: str, target: str | None = None) -> set[str]:
     """Run folders (results/runs/{case}/L{level}_{surface}) of the jobs a dry run of
-    ``target`` (default: all) plans; ``args`` last (``--configfile`` takes every word after it)."""
-    done = snakemake(root, "-n", "--forceall", *([target] if target else []), *args)
+    ``target`` (default: all; several separated by spaces) plans; ``args`` last
+    (``--configfile`` takes every word after it)."""
+    done = snakemake(root, "-n", "--forceall", *(target.split() if target else []), *args)
     assert done.returncode == 0, done.stderr + done.stdout
     return set(re.findall(r"results/runs/\w+/L\d+_\w+(?=/summary\.json)", done.stdout + done.stderr))
+
+
+@pytest.mark.parametrize("configfile", [None, "config/smoke.yaml"])
+def test_order_2_runs_land_in_their_own_folders(workdir, configfile):
+    """The accuracy figure asks for the order-2 runs (``_o2`` folders, run with --order 2)
+    beside the order-1 ones; the paper's figures ask for order 1 alone."""
+    args = ("--configfile", configfile) if configfile else ()
+    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    smoke = yaml.safe_load((REPO / configfile).read_text()) if configfile else None
+    done = snakemake(workdir, "-n", "--forceall", "-p", "paper_figures/accuracy.png", *args)
+    assert done.returncode == 0, done.stderr + done.stdout
+    runs = set(re.findall(r"results/runs/\w+/L\d+_\w+(?=/summary\.json)", done.stdout))
+    order2 = {r for r in runs if r.endswith("_o2")}
+    assert order2 == expected_order2_runs(config, smoke) and order2
+    assert all(not r.startswith("results/runs/planar") for r in runs)
+    commands = re.findall(r"cgfem run .*", done.stdout)
+    assert sorted(c.split("--out ")[1].split()[0] for c in commands if "--order 2 --out " in c) == sorted(order2)
+    paper = planned_runs(workdir, *args, target="paper_figures/fig13.png paper_figures/fig14.png "
+                                                "paper_figures/fig15.png paper_figures/fig17.png")
+    assert paper and not any(r.endswith("_o2") for r in paper)
 
 
 @pytest.mark.parametrize("configfile", [None, "config/smoke.yaml"])
@@ -80,7 +120,7 @@ def test_every_definition_is_planned(workdir, configfile):
     """The three surface definitions at every level of every example; fig10 compares facets
     with nurbs_fit as the paper does."""
     args = ("--configfile", configfile) if configfile else ()
-    runs = planned_runs(workdir, *args)
+    runs = {r for r in planned_runs(workdir, *args) if not r.endswith("_o2")}     # order 1
     assert {re.search(r"/L\d+_(\w+)$", path)[1] for path in runs} == {"facets", "nurbs_fe", "nurbs_fit"}
     config = yaml.safe_load((REPO / (configfile or "config/config.yaml")).read_text())
     assert len(runs) == expected_runs(config)
@@ -102,6 +142,13 @@ def test_lint_is_clean(workdir):
     done = snakemake(workdir, "--lint")
     assert done.returncode == 0, done.stdout + done.stderr
     assert "Congratulations" in done.stdout + done.stderr
+
+
+def test_a_bad_orders_entry_is_refused(workdir, tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("examples:\n  chain3: {case: config/cases/chain3.yaml, levels: [0], orders: {3: {levels: [0]}}}\n")
+    done = snakemake(workdir, "-n", "--configfile", str(bad))
+    assert done.returncode != 0 and "orders" in done.stdout + done.stderr
 
 
 def test_a_bad_config_is_refused(workdir, tmp_path):

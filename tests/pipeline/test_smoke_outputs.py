@@ -30,7 +30,8 @@ from cgfem.solve.newton import window_orders
 from tests.support.paths import REPO
 
 #: every figure of rule ``all`` (workflow/rules/common.smk FIGURES)
-FIGURES = ["fig09", "fig10", "fig13", "fig14", "fig15", "fig17", "newton", "timings", "geometry"]
+FIGURES = ["fig09", "fig10", "fig13", "fig14", "fig15", "fig17", "newton", "timings", "geometry",
+           "accuracy"]
 STATUSES = {"converged", "outer_not_converged", "failed"}
 
 #: planar: resultant of the lateral tractions t_z = 1e12 (0.01 - z) z Pa on the two lateral
@@ -110,7 +111,8 @@ def test_every_summary_parses_with_finite_values(runs):
     for run in runs:
         s = _strict_json(run.folder / "summary.json")
         assert s["status"] in STATUSES, f"{run.folder}: status {s['status']}"
-        assert run.folder.name == f"L{s['level']}_{s['surface']}", run.folder
+        order = s.get("order", 1)
+        assert run.folder.name == f"L{s['level']}_{s['surface']}" + (f"_o{order}" if order != 1 else ""), run.folder
         assert run.folder.parent.name == s["case"], run.folder
         bad = [where for where, v in _numbers(s) if not math.isfinite(v)]
         assert not bad, f"{run.folder}: non-finite {bad[:5]}"
@@ -292,10 +294,62 @@ def test_figures_are_nonempty_png_and_pdf(results):
         assert png.stat().st_size > 10_000 and pdf.stat().st_size > 1_000, name
 
 
-def test_claims_table_has_the_four_claims(results):
+def test_claims_table_has_the_four_claims_and_the_order_2_line(results, runs):
     if os.environ.get("CGFEM_SMOKE_FIGURES"):
         pytest.skip("CGFEM_SMOKE_FIGURES is set: a partial run, rule claims not expected")
     text = (results / "claims.md").read_text()
     rows = [line for line in text.splitlines() if line.startswith("| ") and line[2].isdigit()]
-    assert [row.split("|")[1].strip() for row in rows] == ["1", "2", "3", "4"]
-    assert all(row.split("|")[3].strip() in ("yes", "no") for row in rows)
+    assert [row.split("|")[1].strip() for row in rows] == ["1", "2", "3", "4", "3, 4 (order 2)"]
+    assert all(row.split("|")[3].strip() in ("yes", "no") for row in rows[:4])
+    # the smoke run has no order-2 facets run: claim 3 at order 2 cannot be decided
+    order2 = {(r.case, r.surface) for r in runs if r.order == 2}
+    verdict = rows[4].split("|")[3].strip()
+    assert verdict in ("yes", "no", "not decided")
+    if ("chain2_steel", "facets") not in order2 or not any(c == "chain3" for c, _ in order2):
+        assert verdict == "not decided", rows[4]
+
+
+# ---------------------------------------------------------------- the accuracy figure
+
+
+def test_order_2_runs_ran_at_order_2(runs):
+    """The smoke configuration's order-2 run exists, ran with triquadratic elements (more
+    unknowns than order 1 at its level) and reached the last load step."""
+    order2 = [r for r in runs if r.order == 2]
+    assert order2, "no order-2 run"
+    for run in order2:
+        assert run.folder.name.endswith("_o2") and not run.failed, run.folder
+        twin = [r for r in runs if (r.case, r.level, r.surface, r.order) == (run.case, run.level, run.surface, 1)]
+        assert all(run.dofs > 4 * r.dofs for r in twin), (run.folder, run.dofs, [r.dofs for r in twin])
+
+
+def test_accuracy_figure_draws_every_chain_run_and_its_target(results, runs):
+    """The accuracy figure, redrawn from the results as the pipeline draws it: one point per
+    chain run that reached the last step at its DOFs, wall time and final pulled reaction, a
+    line per (definition, order); the target line is the finest order-2 value (the smoke run
+    solves no body-fitted reference)."""
+    if "accuracy" not in _figure_names():
+        pytest.skip("the accuracy figure was not made")
+    from cgfem.report import figure
+    from cgfem.report.accuracy import CHAINS
+
+    pulled = _fig13_entries()["pulled"]
+    chains = [r for r in runs if r.case in CHAINS]
+    fig = figure("accuracy", [str(r.folder / "summary.json") for r in chains], pulled=pulled)
+    drawn = {}
+    for ax in fig.axes[::2]:                   # the panels against DOFs, one per example
+        case = ax.get_title().split(":")[0]
+        for line in ax.get_lines():
+            drawn[(case, line.get_label())] = (np.asarray(line.get_xdata(), float), np.asarray(line.get_ydata(), float))
+    for run in chains:
+        if run.failed:
+            continue
+        x, y = drawn[(run.case, f"{run.surface}, order {run.order}")]
+        hit = np.flatnonzero(x == run.dofs)
+        assert hit.size == 1 and y[hit[0]] == run.reactions(pulled)[-1, 1], run.folder
+    for case in {r.case for r in chains if r.order == 2}:
+        finest = max(r.level for r in chains if r.case == case and r.order == 2 and not r.failed)
+        values = {r.reactions(pulled)[-1, 1] for r in chains
+                  if (r.case, r.order, r.level) == (case, 2, finest) and not r.failed}
+        target = [v for (c, label), v in drawn.items() if c == case and label.startswith("finest order 2")]
+        assert len(target) == 1 and target[0][1][0] in values, (case, target)

@@ -282,7 +282,8 @@ def test_map_figures_one_panel_per_run(tmp_path):
 
     fig = figure("fig15", paths[:2])
     titles = [ax.get_title() for ax in fig.axes if ax.images]
-    assert titles == ["facets L0: 3 active points", "nurbs_fe L0: 3 active points"]
+    assert titles == ["(a) facets L0: 3 active points", "(b) nurbs_fe L0: 3 active points",
+                      "(c) nurbs_fe L0: 3 active points on link_b"]
 
     chain3 = [make_run(tmp_path, "chain3", 0, s, bodies=("link_a", "link_c", "link_b"), von_mises=v)
               for s, v in (("facets", 2e8), ("nurbs_fe", 3e8))]
@@ -437,6 +438,29 @@ def test_contact_points_are_drawn_where_the_file_puts_them(tmp_path):
     np.testing.assert_array_equal(active_contact_points(run), np.asarray(cloud.points)[:4])
     np.testing.assert_allclose(run.contact_force(), [0.0, 1.0, 0.0])
     np.testing.assert_allclose(run.contact_force(pair="link_b/link_a"), [0.0, 1.0, 0.0])
+
+
+def test_fig15_panel_c_draws_the_active_points_on_the_deformed_slave(tmp_path):
+    """Panel (c): the slave body of the first pair (link_b), warped by its displacement, its
+    active contact points as stored, the camera on the side of their mean normal."""
+    from cgfem.report.maps import contact_panel
+
+    path = make_run(tmp_path, "chain2_rubber", 0, "nurbs_fe", reactions=np.ones((2, 2)), active=4)
+    run = Run.load(path)
+    panel = contact_panel(run)
+    assert panel["body"] == "link_b"
+    cloud = meshio.read(Path(path).parent / "surface_002.vtu")
+    mine = np.asarray(cloud.point_data["body"]).ravel() == 1
+    x, u = np.asarray(cloud.points)[mine], np.asarray(cloud.point_data["displacement"])[mine]
+    np.testing.assert_allclose(panel["points"], x + u)
+    np.testing.assert_allclose(panel["displacement"], u)
+    contact = meshio.read(Path(path).parent / "contact_002.vtu")
+    np.testing.assert_array_equal(panel["active"], np.asarray(contact.points)[:4])
+    np.testing.assert_allclose(panel["view"], [0.0, 0.0, 1.0])
+    # the colour scale of the figure covers panel (c) too
+    fig = figure("fig15", [path])
+    assert len([ax for ax in fig.axes if ax.images]) == 2
+    assert fig.axes[-1].get_ylim()[1] >= np.linalg.norm(u, axis=1).max() * (1 - 1e-12)
 
 
 def test_centred_colour_values_keep_zero_in_the_middle():

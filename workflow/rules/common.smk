@@ -9,6 +9,8 @@ validate(config, "../schemas/config.schema.yaml")
 EXAMPLES = config["examples"]
 SURFACES = config["surfaces"]
 RUN = "results/runs/{case}/L{level}_{surface}"
+#: run folder of a higher element order (examples.*.orders; order 1 keeps RUN)
+RUN_ORDER = "results/runs/{case}/L{level}_{surface}_o{order}"
 #: software of every rule (relative to the rule files)
 ENV = "../envs/cgfem.yaml"
 
@@ -17,6 +19,7 @@ wildcard_constraints:
     case="|".join(EXAMPLES),
     level=r"\d+",
     surface="|".join(SURFACES),
+    order="2",
 
 
 def case_file(wildcards):
@@ -37,6 +40,19 @@ def summaries(case, surfaces=None, levels=None):
         level=EXAMPLES[case]["levels"] if levels is None else levels,
         surface=SURFACES if surfaces is None else surfaces,
     )
+
+
+def order_runs(case, order):
+    """(level, surface) of every run of ``case`` at element ``order`` (examples.*.orders)."""
+    entry = EXAMPLES[case].get("orders", {}).get(order, {})
+    return [(level, surface) for level in entry.get("levels", [])
+            for surface in entry.get("surfaces", SURFACES)]
+
+
+def order_summaries(case, order=2):
+    """summary.json of every run of ``case`` at element ``order`` (none if not configured)."""
+    return [f"{RUN_ORDER}/summary.json".format(case=case, level=level, surface=surface, order=order)
+            for level, surface in order_runs(case, order)]
 
 
 def all_summaries():
@@ -65,7 +81,10 @@ def fig15_summaries():
 
 
 #: final products: figure name -> (PNG, PDF)
-FIGURES = ["fig09", "fig10", "fig13", "fig14", "fig15", "fig17", "newton", "timings", "geometry"]
+FIGURES = ["fig09", "fig10", "fig13", "fig14", "fig15", "fig17", "newton", "timings", "geometry",
+           "accuracy"]
+#: the chain examples of the accuracy figure and of the claims' order-2 line
+CHAINS = ["chain2_steel", "chain2_rubber", "chain3"]
 
 
 #: body-fitted references of the chain examples (workflow/rules/reference.smk has one rule

@@ -193,3 +193,26 @@ rule validation:
         "logs/figures/validation.log",
     script:
         "../scripts/figure.py"
+
+
+rule accuracy:
+    """Final pulled reaction of every chain run of both element orders against its DOFs and
+    its wall time, with the best value at hand (body-fitted reference, or the finest order-2
+    run) as a line."""
+    input:
+        [path for case in CHAINS for path in summaries(case) + order_summaries(case)],
+        reference_files(),
+    output:
+        png=report(
+            "paper_figures/accuracy.png", caption="../report/accuracy.rst", category="Validation"
+        ),
+        pdf="paper_figures/accuracy.pdf",
+    params:
+        name="accuracy",
+        options={k: v for k, v in config["figures"]["fig13"]["options"].items() if k != "clamped"},
+    conda:
+        ENV
+    log:
+        "logs/figures/accuracy.log",
+    script:
+        "../scripts/figure.py"

@@ -21,3 +21,26 @@ rule run_case:
         "NUMBA_NUM_THREADS={threads} OMP_NUM_THREADS={threads} MKL_NUM_THREADS={threads} "
         "cgfem run {input.case} --level {wildcards.level} --surface {wildcards.surface} "
         "--out {params.out} 2> {log} || [ $? -eq 1 ] && [ -f {output.summary} ]"
+
+
+rule run_case_order:
+    """As run_case (order 1, the paper's trilinear elements) with elements of a higher order
+    (``examples.*.orders``, ``cgfem run --order``), into a folder of its own (``_o{order}``)."""
+    input:
+        case=case_file,
+        check="results/check/{case}.json",
+    output:
+        summary=f"{RUN_ORDER}/summary.json",
+    params:
+        out=lambda wildcards: RUN_ORDER.format(**wildcards),
+    conda:
+        ENV
+    log:
+        "logs/runs/{case}/L{level}_{surface}_o{order}.log",
+    benchmark:
+        "results/benchmarks/runs/{case}/L{level}_{surface}_o{order}.tsv"
+    threads: 1
+    shell:
+        "NUMBA_NUM_THREADS={threads} OMP_NUM_THREADS={threads} MKL_NUM_THREADS={threads} "
+        "cgfem run {input.case} --level {wildcards.level} --surface {wildcards.surface} "
+        "--order {wildcards.order} --out {params.out} 2> {log} || [ $? -eq 1 ] && [ -f {output.summary} ]"

@@ -4,6 +4,7 @@ it is the caller's (:func:`cgfem.report.style.save_figure`)."""
 
 from __future__ import annotations
 
+from cgfem.report.accuracy import fig_accuracy
 from cgfem.report.convergence import fig09_energy_error
 from cgfem.report.curves import (fig10_surface_profile, fig13_reactions, fig_geometry_error,
                                  fig_newton_residuals, fig_timings)
@@ -18,6 +19,7 @@ FIGURES = {
     "timings": fig_timings,
     "geometry": fig_geometry_error,
     "validation": fig_validation,
+    "accuracy": fig_accuracy,
 }
 
 

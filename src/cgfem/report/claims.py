@@ -9,6 +9,10 @@ claims").
 4. ``facets`` gives a lower peak von Mises stress than ``nurbs_fe`` in the middle link of chain3
    (the paper compares them on its meshes a and b, our levels 0 and 1).
 
+A last line asks whether claims 3 and 4 still hold with triquadratic elements (``cgfem run
+--order 2``): each is decided on the order-2 runs as above, at the levels the configuration
+names for them; the line says "not decided" when the runs it needs are absent.
+
 "The definitions" are those the results hold; the claim's text names them. "Converge" means
 status ``converged``: a run whose outer loop stopped at its cap (``outer_not_converged``) does
 not count as converged.
@@ -52,6 +56,17 @@ class Claim:
     numbers: str
     #: distance of the runs the claim uses to the body-fitted reference ("" if none applies)
     distance: str = ""
+    #: False when the runs the claim needs are absent (or none of them is comparable)
+    decided: bool = True
+    #: the table's first column ("" for the claim's number)
+    row: str = ""
+
+    @property
+    def verdict(self) -> str:
+        """"yes", "no" or "not decided" (a claim of the paper's four says "no" then)."""
+        if not self.decided and self.row:
+            return "not decided"
+        return "yes" if self.reproduced else "no"
 
 
 def _find(runs: list[Run], surface: str, level: int) -> Run | None:
@@ -114,7 +129,7 @@ def claim_lower_reaction(runs: list[Run], level: int, pulled: str, component: in
             f"on chain2 mesh {level}")
     chosen = {s: _find(runs, s, level) for s in ("facets", *nurbs)}
     if any(r is None or r.n_steps == 0 for r in chosen.values()):
-        return Claim(3, text, False, f"missing or empty runs at level {level}")
+        return Claim(3, text, False, f"missing or empty runs at level {level}", decided=False)
     load = min(r.load_factors()[-1] for r in chosen.values())
     force = {}
     for s, r in chosen.items():
@@ -145,7 +160,7 @@ def claim_lower_von_mises(runs: list[Run], levels: Sequence[int], body: str) -> 
         if verdict is not None:
             decided.append(verdict)
         numbers.append(f"L{level}: {note}")
-    return Claim(4, text, bool(decided) and all(decided), "; ".join(numbers))
+    return Claim(4, text, bool(decided) and all(decided), "; ".join(numbers), decided=bool(decided))
 
 
 def _von_mises_at(runs: list[Run], level: int, body: str) -> tuple[bool | None, str]:
@@ -162,13 +177,43 @@ def _von_mises_at(runs: list[Run], level: int, body: str) -> tuple[bool | None, 
     return peak["facets"] < peak["nurbs_fe"], ", ".join(f"{s} {p / 1e6:.6g} MPa" for s, p in peak.items())
 
 
+def claim_order2(chain2: list[Run], chain3: list[Run], *, reaction_level: int, pulled: str,
+                 component: int, von_mises_levels: Sequence[int], body: str,
+                 refs: dict[str, Reference] | None = None) -> Claim:
+    """Claims 3 and 4 on the order-2 runs of chain2 and chain3 (runs of other orders are left
+    out), each decided as at order 1 at ``reaction_level`` and ``von_mises_levels``: "yes"
+    when both are decided and hold, "no" when one decided fails, "not decided" otherwise."""
+    chain2 = [r for r in chain2 if r.order == 2]
+    chain3 = [r for r in chain3 if r.order == 2]
+    three = claim_lower_reaction(chain2, reaction_level, pulled, component)
+    four = claim_lower_von_mises(chain3, von_mises_levels, body)
+    failed = any(c.decided and not c.reproduced for c in (three, four))
+    decided = failed or (three.decided and four.decided)
+    text = f"claims 3 and 4 still hold with triquadratic elements (order 2): {three.text}; {four.text}"
+    numbers = "; ".join(f"claim {c.number}{'' if c.decided else ' (not decided)'}: {c.numbers}"
+                        for c in (three, four))
+    distance = ""
+    if refs:
+        used3 = [r for r in chain2 if r.level == reaction_level]
+        used4 = [r for r in chain3 if r.level in von_mises_levels and r.surface in ("facets", "nurbs_fe")]
+        distance = (f"claim 3: {reference_distance(used3, refs)}; "
+                    f"claim 4: {reference_distance(used4, refs, body)}")
+    return Claim(3, text, bool(decided and not failed), numbers, distance, decided=bool(decided),
+                 row="3, 4 (order 2)")
+
+
 def claims(error_tables, chain2_summaries, chain3_summaries, *, rate_tolerance: float,
            reaction_level: int, pulled: str, component: int, von_mises_levels: Sequence[int],
-           von_mises_body: str, references: Sequence = ()) -> list[Claim]:
+           von_mises_body: str, references: Sequence = (), order2: dict | None = None,
+           order2_summaries: Sequence = ()) -> list[Claim]:
     """The four claims from the planar error tables and the chain2 and chain3 run folders;
     ``references``: reference JSONs of :mod:`cgfem.reference.tori` (any of the chain
-    examples), whose distance to the runs each claim uses is added to it."""
-    chain2, chain3 = load_runs(chain2_summaries), load_runs(chain3_summaries)
+    examples), whose distance to the runs each claim uses is added to it. With ``order2``
+    (``reaction_level``, ``von_mises_levels``), a fifth line decides claims 3 and 4 on the
+    order-2 run folders ``order2_summaries`` (:func:`claim_order2`). Runs of other orders
+    than 1 among the first summaries are left out of the four claims."""
+    chain2 = [r for r in load_runs(chain2_summaries) if r.order == 1]
+    chain3 = [r for r in load_runs(chain3_summaries) if r.order == 1]
     found = [claim_optimal_rate(error_tables, rate_tolerance),
              claim_coarse_facets(chain2, pulled, component),
              claim_lower_reaction(chain2, reaction_level, pulled, component),
@@ -180,6 +225,13 @@ def claims(error_tables, chain2_summaries, chain3_summaries, *, rate_tolerance: 
     for claim in found[1:]:
         out.append(replace(claim, distance=reference_distance(
             used[claim.number], refs, von_mises_body if claim.number == 4 else None)))
+    if order2 is not None:
+        runs = load_runs(order2_summaries)
+        out.append(claim_order2([r for r in runs if r.case.startswith("chain2")],
+                                [r for r in runs if r.case == "chain3"],
+                                reaction_level=order2["reaction_level"], pulled=pulled,
+                                component=component, von_mises_levels=order2["von_mises_levels"],
+                                body=von_mises_body, refs=refs))
     return out
 
 
@@ -228,7 +280,7 @@ def claims_markdown(found: list[Claim]) -> str:
              "files; not edited by hand.", "",
              "| # | claim | reproduced | numbers | distance to the reference |",
              "|---|---|---|---|---|"]
-    lines += [f"| {c.number} | {c.text} | {'yes' if c.reproduced else 'no'} | {c.numbers} | "
+    lines += [f"| {c.row or c.number} | {c.text} | {c.verdict} | {c.numbers} | "
               f"{c.distance or 'no reference'} |" for c in found]
     return "\n".join(lines) + "\n"
 

@@ -1,6 +1,7 @@
 """Colour maps of result fields rendered off-screen with pyvista and laid out in a matplotlib
-grid: sigma_y on chain2_steel (Fig. 14), |u| and the active contact points on chain2_rubber
-(Fig. 15), von Mises on the middle link of chain3 (Fig. 17).
+grid: sigma_y on chain2_steel (Fig. 14), |u| and the active contact points on chain2_rubber,
+with the active points on the deformed slave link seen from the contact zone (Fig. 15), von
+Mises on the middle link of chain3 (Fig. 17).
 
 Fields are drawn on the triangulated boundary of ``boundary_NNN.vtu`` (the exact NURBS
 surface, or the facets, which the active hexahedra overhang), smoothly shaded and warped by
@@ -21,7 +22,7 @@ from matplotlib.colors import Normalize, TwoSlopeNorm
 from matplotlib.figure import Figure
 
 from cgfem.embedding.tessellate import keep_vertices
-from cgfem.report.runs import ACTIVE, BODY, DISPLACEMENT, STRESS, VON_MISES, Run, load_runs, stress_component
+from cgfem.report.runs import ACTIVE, BODY, DISPLACEMENT, NORMAL, STRESS, VON_MISES, Run, load_runs, stress_component
 from cgfem.report.style import new_figure
 
 if not os.environ.get("DISPLAY"):
@@ -29,13 +30,19 @@ if not os.environ.get("DISPLAY"):
 
 #: pixels of one rendered panel
 PANEL_PIXELS = (800, 600)
+#: a view on points (Fig. 15c) frames at least this fraction of the body's largest extent
+#: about them
+FRAME_FRACTION = 0.1
 
 
 def render(points: np.ndarray, values: np.ndarray, clim: tuple[float, float], cmap: str,
-           triangles: np.ndarray | None = None, extra: np.ndarray | None = None) -> np.ndarray:
+           triangles: np.ndarray | None = None, extra: np.ndarray | None = None,
+           view: np.ndarray | None = None) -> np.ndarray:
     """RGB image (rows, cols, 3) of the surface ``triangles`` (m, 3) on ``points`` (n, 3),
     or of the points alone when ``triangles`` is None, coloured by ``values`` (n,) in
-    ``clim``, with optional black ``extra`` points (k, 3) on top; isometric view."""
+    ``clim``, with optional black ``extra`` points (k, 3) on top; isometric view, or looking
+    along ``-view`` (a direction (3,) from the scene towards the camera) at the ``extra``
+    points, framed with a margin (:data:`FRAME_FRACTION`)."""
     import pyvista as pv
 
     plotter = pv.Plotter(off_screen=True, window_size=PANEL_PIXELS)
@@ -52,8 +59,17 @@ def render(points: np.ndarray, values: np.ndarray, clim: tuple[float, float], cm
     if extra is not None and len(extra):
         plotter.add_points(pv.PolyData(np.asarray(extra, float)), color="black", point_size=5.0,
                            render_points_as_spheres=True)
-    plotter.view_isometric()
-    plotter.reset_camera()
+    if view is None:
+        plotter.view_isometric()
+        plotter.reset_camera()
+    else:   # look along -view at the extra points, framed with a margin
+        view = np.asarray(view, float) / np.linalg.norm(view)
+        up = np.cross(view, [1.0, 0.0, 0.0] if abs(view[0]) < 0.9 else [0.0, 1.0, 0.0])
+        focus = np.asarray(extra, float) if extra is not None and len(extra) else points
+        centre = focus.mean(axis=0)
+        half = np.maximum(np.ptp(focus, axis=0), FRAME_FRACTION * np.ptp(points, axis=0).max())
+        plotter.camera_position = [tuple(centre + view), tuple(centre), tuple(up)]
+        plotter.reset_camera(bounds=np.column_stack([centre - half, centre + half]).ravel())
     image = plotter.screenshot(return_img=True)
     plotter.close()
     return np.asarray(image)
@@ -139,16 +155,46 @@ def active_contact_points(run: Run, step: int = -1) -> np.ndarray:
     return x[np.asarray(cloud.point_data[ACTIVE]).ravel() > 0]
 
 
+def slave_body(run: Run, step: int = -1) -> str:
+    """The slave body of the first contact pair of a step (pairs are ``"slave/master"``)."""
+    pairs = run.steps[step]["contact"]["pairs"]
+    return next(iter(pairs)).split("/")[0]
+
+
+def contact_panel(run: Run, step: int = -1) -> dict:
+    """What panel (c) of Fig. 15 draws: the deformed boundary of the slave body of the run's
+    first pair (``body``; ``points``, ``displacement``, ``triangles`` as :func:`_surface`),
+    its active surface integration points (``active``, (m, 3), current positions) and the
+    direction the camera looks from (``view``: the mean current slave normal of the active
+    points, so the contact zone faces the viewer; isometric if none is active)."""
+    body = slave_body(run, step)
+    points, u, _, triangles = _surface(run, body)
+    cloud = run.contact_points(step)
+    on = np.asarray(cloud.point_data[ACTIVE]).ravel() > 0
+    active = np.asarray(cloud.points, float)[on]
+    normal = np.asarray(cloud.point_data[NORMAL], float)[on].sum(axis=0)
+    view = normal / np.linalg.norm(normal) if np.linalg.norm(normal) > 0 else None
+    return {"body": body, "points": points, "displacement": u, "triangles": triangles,
+            "active": active, "view": view}
+
+
 def fig15_deformed_shapes(summaries) -> Figure:
-    """Deformed boundary coloured by |u| at the last step and the active contact points,
-    one panel per run."""
+    """The paper's Fig. 15: (a), (b), ... the deformed boundary coloured by |u| at the last
+    step and the active contact points, one panel per run; last panel, the paper's (c): the
+    active surface integration points on the deformed slave link of the last run (nurbs_fe
+    in the paper's comparison), seen from the contact zone (:func:`contact_panel`)."""
     runs = load_runs(summaries)
     surfaces = [_surface(r) for r in runs]
     values = [np.linalg.norm(s[1], axis=1) for s in surfaces]
-    clim = _clim(values)
+    last = contact_panel(runs[-1])
+    clim = _clim([*values, np.linalg.norm(last["displacement"], axis=1)])
     active = [active_contact_points(r) for r in runs]
     images = [render(s[0], v, clim, "viridis", s[3], extra=a) for s, v, a in zip(surfaces, values, active)]
-    titles = [f"{_title(r)}: {len(a)} active points" for r, a in zip(runs, active)]
+    titles = [f"({chr(97 + k)}) {_title(r)}: {len(a)} active points" for k, (r, a) in enumerate(zip(runs, active))]
+    images.append(render(last["points"], np.linalg.norm(last["displacement"], axis=1), clim, "viridis",
+                         last["triangles"], extra=last["active"], view=last["view"]))
+    titles.append(f"({chr(97 + len(runs))}) {runs[-1].label}: {len(last['active'])} active points "
+                  f"on {last['body']}")
     return image_grid(images, titles, clim, "viridis", "|u| (m)")
 
 

@@ -2,7 +2,7 @@
 :mod:`cgfem.contact.output` write): the only module of the report package that knows file
 and field names, so a rename is a change here alone.
 
-A run folder ``results/runs/{case}/L{level}_{surface}/`` holds ``summary.json``,
+A run folder ``results/runs/{case}/L{level}_{surface}/`` (``..._o2/`` for order 2) holds ``summary.json``,
 ``step_NNN.vtu`` (hexahedra of all bodies), ``surface_NNN.vtu`` (boundary points at their
 reference positions) and, with contact, ``contact_NNN.vtu`` (slave points at their current
 positions); ``NNN`` counts converged steps from 1 (README "Result files").
@@ -34,7 +34,8 @@ ACTIVE = "active"                   # (n,) contact point active (1) or not (0)
 PRESSURE = "pressure"               # (n,) lambda_N (Pa), negative in compression
 CONTACT_FORCE = "force"             # (n, 3) force of the master on the slave point (N)
 CONTACT_WEIGHT = "weight"           # (n,) area weight (m^2)
-CONTACT_FIELDS = ("gap", PRESSURE, "p_N", ACTIVE, "normal", CONTACT_WEIGHT, CONTACT_FORCE, "pair")
+NORMAL = "normal"                   # (n, 3) current unit outward normal of the slave
+CONTACT_FIELDS = ("gap", PRESSURE, "p_N", ACTIVE, NORMAL, CONTACT_WEIGHT, CONTACT_FORCE, "pair")
 
 #: statuses of summary.json: every step solved with the outer loop below outer_tol; every
 #: step solved but the outer loop of at least one stopped at its cap (exit 1); a step failed
@@ -98,7 +99,8 @@ class Run:
 
     @property
     def label(self) -> str:
-        return f"{self.surface} L{self.level}"
+        """``"{surface} L{level}"``, with ``" o{order}"`` after it for an order other than 1."""
+        return f"{self.surface} L{self.level}" + (f" o{self.order}" if self.order != 1 else "")
 
     @property
     def status_note(self) -> str:

@@ -3,6 +3,7 @@ saving (PNG at print resolution and PDF), which is the caller's job."""
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import matplotlib
@@ -10,6 +11,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
+
+from cgfem.atomic import write_bytes_atomic  # noqa: E402
 
 #: colour of each contact-surface definition
 SURFACE_COLOURS = {"facets": "#d95f02", "nurbs_fe": "#1b9e77", "nurbs_fit": "#7570b3"}
@@ -54,7 +57,10 @@ def new_figure(n_rows: int = 1, n_cols: int = 1, width: float = 6.5, height: flo
 
 
 def save_figure(fig: Figure, png: str | Path, pdf: str | Path) -> None:
-    """Write ``fig`` as PNG (``PRINT_DPI``) and PDF, then close it."""
-    fig.savefig(png, dpi=PRINT_DPI)
-    fig.savefig(pdf)
+    """Write ``fig`` as PNG (``PRINT_DPI``) and PDF, each atomically (a reader never sees a
+    part of a file), then close it."""
+    for path, options in ((png, {"format": "png", "dpi": PRINT_DPI}), (pdf, {"format": "pdf"})):
+        buffer = io.BytesIO()
+        fig.savefig(buffer, **options)
+        write_bytes_atomic(Path(path), buffer.getvalue())
     plt.close(fig)

@@ -148,7 +148,7 @@ def fig_validation(inputs, von_mises: dict | None = None) -> Figure:
     return fig
 
 
-def _widen_log_x(ax, span: float = 4.0) -> None:
+def widen_log_x(ax, span: float = 4.0) -> None:
     """Widen a log x axis to at least the ratio ``span`` about its centre, so that its tick
     labels stay readable when the runs' DOFs are nearly equal."""
     lo, hi = ax.get_xlim()
@@ -185,7 +185,7 @@ def _panel_dofs(ax, case: str, ref: Reference, runs: list[Run], error, what: str
         ax.axhline(uncertainty, color="k", linestyle=":", linewidth=0.8,
                    label=f"reference uncertainty ({uncertainty:.2%})")
     ax.set(title=f"{case}: {what}", xlabel="DOFs", ylabel="|relative error|")
-    _widen_log_x(ax)
+    widen_log_x(ax)
     ax.legend(fontsize=5.5)
 
 
@@ -200,5 +200,5 @@ def _panel_absolute(ax, case: str, ref: Reference, runs: list[Run], key: str) ->
     ax.axhline(target, color="k", linewidth=0.8, label=f"reference ({ref.dofs} DOFs, NGSolve)")
     ax.axhspan(target * (1 - ref.uncertainty), target * (1 + ref.uncertainty), color="0.85", zorder=0)
     ax.set(title=f"{case}: final pulled reaction", xlabel="DOFs", ylabel="F_y (N)")
-    _widen_log_x(ax)
+    widen_log_x(ax)
     ax.legend(fontsize=5.5)
