@@ -235,7 +235,8 @@ def test_rotation_stretch_of_a_turned_and_strained_body():
     """A body turned (linearized) by omega = 0.05 rad about z and strained by 1e-3 along y,
     held at two points 0.4 m apart along y: the turn stretches their chord by
     |omega x d|^2 / (2 |d|) = 5e-4 m, which an exact turn would not, the strain by 4e-4 m;
-    both read to 1 % (the points' reference positions are recovered to first order)."""
+    both read to 1 % (the points' reference positions are recovered to first order), with the
+    sum of the gaps at the chord's ends."""
     body = free_box()
     x = body.space.coordinates
     c = x.mean(axis=0)
@@ -246,7 +247,8 @@ def test_rotation_stretch_of_a_turned_and_strained_body():
         return np.cross(omega, r) + strain * r[:, 1:2] * np.array([0.0, 1.0, 0.0])
     u = displacement(x).ravel()
     X = np.array([[0.5, 0.1, 0.25], [0.5, 0.5, 0.25]])
-    turn, spurious, elastic = rotation_stretch(body.space, u, X + displacement(X))
+    turn, spurious, elastic, room = rotation_stretch(body.space, u, X + displacement(X), [1e-4, 2e-4])
     assert turn == pytest.approx(0.05, rel=1e-10)
     assert spurious == pytest.approx((0.05 * 0.4) ** 2 / 0.8, rel=1e-2)
     assert elastic == pytest.approx(strain * 0.4, rel=1e-2)
+    assert room == pytest.approx(3e-4)

@@ -237,14 +237,14 @@ class ContactSet:
         """Every fitted patch with its control displacements ``V = T Z`` (n_ctrl, 3) at ``u``."""
         return [(b, b.fit.T @ u[b.z].reshape(-1, 3)) for b in self.blocks]
 
-    def held_at(self, u: np.ndarray) -> list[tuple[int, int, np.ndarray]]:
-        """Per pair with master hits: its slave and master bodies and where it holds the
-        slave (current position (3,), :meth:`ContactPair.held_point`)."""
+    def held_at(self, u: np.ndarray) -> list[tuple[int, int, np.ndarray, float]]:
+        """Per pair with master hits: its slave and master bodies, where it holds the slave
+        (current position (3,)) and the gap there (m) (:meth:`ContactPair.held_point`)."""
         out = []
         for k, p in enumerate(self.pairs):
-            centre = p.held_point(self._split(u, k)[0])
-            if centre is not None:
-                out.append((p.slave, p.master, centre))
+            held = p.held_point(self._split(u, k)[0])
+            if held is not None:
+                out.append((p.slave, p.master, *held))
         return out
 
     def gaps(self, u: np.ndarray) -> list[np.ndarray]:

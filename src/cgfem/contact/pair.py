@@ -389,18 +389,19 @@ class ContactPair:
                     st.held_active[hold] = active[hold]
         st.active, st.hits, st.natural = active, hits, natural
 
-    def held_point(self, u_s: np.ndarray) -> np.ndarray | None:
+    def held_point(self, u_s: np.ndarray) -> tuple[np.ndarray, float] | None:
         """Where the pair holds its slave (current position (3,), from the kinematic vector
-        ``u_s``): the mean of the points active at the last linearization point, or if none
-        is, the point nearest its master (least gap among those with a master hit); None
-        without hits."""
+        ``u_s``) and the gap there (m): the mean of the points active at the last
+        linearization point and 0, or if none is, the point nearest its master (least gap
+        among those with a master hit) and its gap; None without hits."""
         st = self.state
         if st.active is None or st.hits is None or not st.hits.found.any():
             return None
         x = self._slave(u_s)[1].x
         if st.active.any():
-            return x[st.active].mean(axis=0)
-        return x[int(np.argmin(np.where(st.hits.found, st.hits.g, np.inf)))]
+            return x[st.active].mean(axis=0), 0.0
+        nearest = int(np.argmin(np.where(st.hits.found, st.hits.g, np.inf)))
+        return x[nearest], max(float(st.hits.g[nearest]), 0.0)
 
     def gaps(self, u_s: np.ndarray, u_m: np.ndarray) -> np.ndarray:
         """Every slave point's gap at ``(u_s, u_m)`` (n,), NaN without a master hit; the

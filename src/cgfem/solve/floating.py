@@ -21,6 +21,11 @@ import scipy.sparse as sp
 from cgfem.solve.linear import rigid_body_modes
 from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
 
+#: a turn's stretch below this many element sizes is not rejected, whatever the elastic
+#: stretch (a floating body's drift under its tangent shift where nothing loads it; a slack
+#: chain's stretch is 0.3 h and more)
+STRETCH_FLOOR_H = 1e-3
+
 
 def free_rigid_modes(coordinates: np.ndarray, K: sp.spmatrix, free_mode: float) -> int:
     """How many rigid motions a body's own tangent ``K`` (3 n, 3 n; its conditions included,
@@ -58,16 +63,19 @@ def spurious_stretch(omega: np.ndarray, chord: np.ndarray) -> float:
     return float(np.dot(turned, turned) / (2.0 * d))
 
 
-def rotation_stretch(space, u: np.ndarray, points: np.ndarray) -> tuple[float, float, float]:
+def rotation_stretch(space, u: np.ndarray, points: np.ndarray, gaps: np.ndarray | None = None
+                     ) -> tuple[float, float, float, float]:
     """For a body (its FE ``space``, nodal displacement ``u`` (3 n,)) held at ``points`` (k, 3)
-    (current positions, one per contact, k >= 2): its rigid rotation ``|omega|`` (rad,
-    :func:`rigid_fit`), and over the chords between the points the largest
-    :func:`spurious_stretch` (m) with the elastic stretch of the same chord, the change of its
-    length by the displacement less the rigid motion (m). A point in no active element of the
+    (current positions, one per contact, k >= 2, with the ``gaps`` (k,) (m) there, 0 if
+    None): its rigid rotation ``|omega|`` (rad, :func:`rigid_fit`), and for the chord between
+    two points that the turn stretches most, that :func:`spurious_stretch` (m), the chord's
+    elastic stretch, the change of its length by the displacement less the rigid motion (m),
+    and the room its ends had, the sum of their gaps (m). A point in no active element of the
     body has no elastic displacement here."""
     U = np.asarray(u, float).reshape(-1, 3)
     t, omega, c = rigid_fit(space.coordinates, U)
     x = np.asarray(points, float)
+    room = np.zeros(len(x)) if gaps is None else np.asarray(gaps, float)
     X = x - t - np.cross(omega, x - c)          # reference positions, to first order
     slots, xi = space.locate(X)
     elastic = np.zeros_like(X)
@@ -75,16 +83,16 @@ def rotation_stretch(space, u: np.ndarray, points: np.ndarray) -> tuple[float, f
     if inside.any():
         elastic[inside] = space.interpolate(U, slots[inside], xi[inside]) - t \
             - np.cross(omega, X[inside] - c)
-    worst, stretch = 0.0, 0.0
+    worst = stretch = gap = 0.0
     for a in range(len(X)):
         for b in range(a + 1, len(X)):
             d = X[b] - X[a]
             spurious = spurious_stretch(omega, d)
             if spurious >= worst:
-                worst = spurious
+                worst, gap = spurious, float(room[a] + room[b])
                 stretch = abs(float(np.dot(d, elastic[b] - elastic[a]))) / max(float(np.linalg.norm(d)),
                                                                                 np.finfo(float).tiny)
-    return float(np.linalg.norm(omega)), worst, stretch
+    return float(np.linalg.norm(omega)), worst, stretch, gap
 
 
 def shift_factor(norm: float, largest: float, floor: float = DEFAULT_POLICY.shift_floor) -> float:

@@ -50,8 +50,8 @@ class SolverPolicy:
         sizes ``h``.
     floating_turn : largest nodal move of a floating body in one Newton step, in its radius
         (the RMS distance of its nodes to their centroid): about the largest turn (rad) of a
-        step. A coarse grid's ``h`` lets a step turn a small body far (chain3 at level 0: 0.24
-        rad), and a linearized turn stretches the body (``rotation_stretch``).
+        step. A coarse grid's ``h`` lets a step turn a small body far (1 h turns chain3's middle
+        link by 0.21 rad at level 0), and a linearized turn stretches it (``rotation_stretch``).
     damping_decay, damping_above, damping_max : the Levenberg-Marquardt damping of the shift: a
         step limited to a fraction ``f`` at ``|r|`` above ``damping_above`` of the increment's
         largest multiplies the shift of the next tangents by ``1 / f``; any other step by
@@ -59,7 +59,9 @@ class SolverPolicy:
     rotation_stretch : in small strain a converged state is rejected (the increment cut back)
         where a floating body's linearized rotation stretches a chord between its contacts by
         more than this fraction of the chord's elastic stretch (the rotation is strain-free
-        but not length-preserving); ``inf`` turns the check off.
+        but not length-preserving), more than the gaps at the chord's ends and more than
+        ``STRETCH_FLOOR_H`` element sizes (:meth:`~cgfem.solve.system.System.turned_floating`);
+        ``inf`` turns the check off.
 
     Contact onset (:class:`~cgfem.solve.onset.OnsetLimit`)
     -------------------------------------------------------

@@ -15,7 +15,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from cgfem.contact.assembly import ContactSet
-from cgfem.solve.floating import FloatingBodies, rotation_stretch
+from cgfem.solve.floating import STRETCH_FLOOR_H, FloatingBodies, rotation_stretch
 from cgfem.solve.items import Block, BodyItem
 from cgfem.solve.linear import rigid_body_modes
 from cgfem.solve.onset import OnsetLimit
@@ -126,26 +126,29 @@ class System:
 
     def turned_floating(self, u: np.ndarray) -> str:
         """Why the state ``u`` is not a small-strain solution, empty if it is: a floating
-        body (small strain, held at two or more contacts) whose linearized rotation stretches a
-        chord between its contacts (where each pair holds it, or would: its nearest point
-        where none is active) by more than ``rotation_stretch`` of the chord's elastic stretch
-        (:func:`~cgfem.solve.floating.rotation_stretch`)."""
+        body (small strain, held at two or more places: where each pair holds it, or its
+        point nearest the master where none is active) whose linearized rotation stretches a
+        chord between those places (:func:`~cgfem.solve.floating.rotation_stretch`) by more
+        than ``rotation_stretch`` of the chord's elastic stretch, more than the gaps at its
+        ends (without the stretch they would close) and more than
+        :data:`~cgfem.solve.floating.STRETCH_FLOOR_H` element sizes."""
         ratio = self.policy.rotation_stretch
         if not self.contact or not self.floating.bodies or not np.isfinite(ratio) \
                 or any(b.finite for b in self.bodies):
             return ""
         held = self.contact.held_at(u)
         for i in self.floating.bodies:
-            points = [x for s, m, x in held if i in (s, m)]
-            if len(points) < 2:
+            mine = [(x, g) for s, m, x, g in held if i in (s, m)]
+            if len(mine) < 2:
                 continue
             a, b = self.offsets[i], self.offsets[i + 1]
             body = self.bodies[i]
-            turn, spurious, elastic = rotation_stretch(body.space, u[a:b], np.array(points))
-            if spurious > ratio * elastic and spurious > 1e-9 * body.space.h:
+            turn, spurious, elastic, room = rotation_stretch(body.space, u[a:b], np.array([x for x, _ in mine]),
+                                                             np.array([g for _, g in mine]))
+            if spurious > max(ratio * elastic, room, STRETCH_FLOOR_H * body.space.h):
                 return (f"{body.name} turned {turn:.3g} rad: its linearized rotation stretches it by "
-                        f"{spurious:.3g} m between its contacts, elastically {elastic:.3g} m "
-                        f"(more than rotation_stretch = {ratio:g} of it: beyond small strain)")
+                        f"{spurious:.3g} m between its contacts, elastically {elastic:.3g} m, with "
+                        f"{room:.3g} m of gap (more than rotation_stretch = {ratio:g} of it: beyond small strain)")
         return ""
 
     def recover(self, u: np.ndarray) -> list[np.ndarray]:
