@@ -461,6 +461,12 @@ def test_fig15_panel_c_draws_the_active_points_on_the_deformed_slave(tmp_path):
     fig = figure("fig15", [path])
     assert len([ax for ax in fig.axes if ax.images]) == 2
     assert fig.axes[-1].get_ylim()[1] >= np.linalg.norm(u, axis=1).max() * (1 - 1e-12)
+    # a last step without contact pairs: no panel (c)
+    data = json.loads(Path(path).read_text())
+    data["steps"][-1]["contact"]["pairs"] = {}
+    Path(path).write_text(json.dumps(data))
+    fig = figure("fig15", [path])
+    assert [ax.get_title() for ax in fig.axes if ax.images] == ["(a) nurbs_fe L0: 4 active points"]
 
 
 def test_centred_colour_values_keep_zero_in_the_middle():

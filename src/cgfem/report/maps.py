@@ -182,19 +182,22 @@ def fig15_deformed_shapes(summaries) -> Figure:
     """The paper's Fig. 15: (a), (b), ... the deformed boundary coloured by |u| at the last
     step and the active contact points, one panel per run; last panel, the paper's (c): the
     active surface integration points on the deformed slave link of the last run (nurbs_fe
-    in the paper's comparison), seen from the contact zone (:func:`contact_panel`)."""
+    in the paper's comparison), seen from the contact zone (:func:`contact_panel`); none if
+    that run's last step has no contact pair."""
     runs = load_runs(summaries)
     surfaces = [_surface(r) for r in runs]
     values = [np.linalg.norm(s[1], axis=1) for s in surfaces]
-    last = contact_panel(runs[-1])
-    clim = _clim([*values, np.linalg.norm(last["displacement"], axis=1)])
+    has_pairs = runs[-1].n_steps > 0 and bool(runs[-1].steps[-1].get("contact", {}).get("pairs"))
+    last = contact_panel(runs[-1]) if has_pairs else None     # no contact: no panel (c)
+    clim = _clim([*values, *([np.linalg.norm(last["displacement"], axis=1)] if last else [])])
     active = [active_contact_points(r) for r in runs]
     images = [render(s[0], v, clim, "viridis", s[3], extra=a) for s, v, a in zip(surfaces, values, active)]
     titles = [f"({chr(97 + k)}) {_title(r)}: {len(a)} active points" for k, (r, a) in enumerate(zip(runs, active))]
-    images.append(render(last["points"], np.linalg.norm(last["displacement"], axis=1), clim, "viridis",
-                         last["triangles"], extra=last["active"], view=last["view"]))
-    titles.append(f"({chr(97 + len(runs))}) {runs[-1].label}: {len(last['active'])} active points "
-                  f"on {last['body']}")
+    if last is not None:
+        images.append(render(last["points"], np.linalg.norm(last["displacement"], axis=1), clim, "viridis",
+                             last["triangles"], extra=last["active"], view=last["view"]))
+        titles.append(f"({chr(97 + len(runs))}) {runs[-1].label}: {len(last['active'])} active points "
+                      f"on {last['body']}")
     return image_grid(images, titles, clim, "viridis", "|u| (m)")
 
 
