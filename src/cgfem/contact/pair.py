@@ -397,7 +397,7 @@ class ContactPair:
         st = self.state
         if st.active is None or st.hits is None or not st.hits.found.any():
             return None
-        x = self._slave(u_s)[1].x
+        x = self._slave(u_s).x
         if st.active.any():
             return x[st.active].mean(axis=0), 0.0
         nearest = int(np.argmin(np.where(st.hits.found, st.hits.g, np.inf)))
