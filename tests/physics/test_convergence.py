@@ -52,6 +52,7 @@ def test_energy_and_l2_rates_and_zz_effectivity(shape, h0, surface):
         assert 0.7 <= r["effectivity"] <= 1.5
 
 
+@pytest.mark.long
 def test_fifteen_random_offsets_of_the_torus_all_solve():
     solid = _torus()
     field = CubicField.random(5)

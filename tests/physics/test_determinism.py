@@ -25,11 +25,12 @@ from tests.support.paths import CASES
 #: every test here solves whole problems
 pytestmark = pytest.mark.slow
 
-#: chain3 (a body held by contact alone: the most decisions) in the default suite, the finite
-#: strain chain2_steel with ``-m long``
+#: chain3 (a body held by contact alone: the most decisions) in the default suite with facets
+#: and nurbs_fe; its nurbs_fit (40 s) and the finite strain chain2_steel with ``-m long``
 RUNS = [pytest.param("smoke/chain2_steel.yaml", s, marks=pytest.mark.long, id=f"chain2_steel-{s}")
         for s in ("facets", "nurbs_fe", "nurbs_fit")] \
-    + [pytest.param("chain3.yaml", s, id=f"chain3-{s}") for s in ("facets", "nurbs_fe", "nurbs_fit")]
+    + [pytest.param("chain3.yaml", s, id=f"chain3-{s}", marks=pytest.mark.long if s == "nurbs_fit" else ())
+       for s in ("facets", "nurbs_fe", "nurbs_fit")]
 #: what may differ between repeated runs: wall times and the thread record
 VOLATILE = {"timings", "seconds", "threads"}
 
