@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from cgfem.contact import _ray_kernels as rk
-from cgfem.contact.kinematics import slave_state
+from cgfem.contact.kinematics import state_of
 from cgfem.contact.surfaces import (CANDIDATES, MAX_RAY_NEWTON, RAY_TOL, SAMPLE_REACH, NurbsFeSurface,
                                     RayHits, closed_directions, pack_patches)
 from cgfem.embedding.quadrature import embed, grid_for
@@ -36,7 +36,7 @@ def scene():
     surface = NurbsFeSurface(master, Sm, em.surface, np.arange(len(master.patches)))
     rule = es.boundary
     frames = NurbsFeSurface(slave, Ss, rule, np.arange(len(slave.patches))).slave_frames(rule)
-    st = slave_state(frames, np.zeros((frames.size, 8, 3)))
+    st = state_of(frames.X, frames.A, frames.B)         # undeformed
     u = 0.02 * np.random.default_rng(1).standard_normal(Sm.n_dofs)
     return surface, st.x, st.n, u
 

@@ -87,13 +87,6 @@ class SlaveState:
     norm_m: np.ndarray
 
 
-def slave_state(frames: SlaveFrames, U1: np.ndarray) -> SlaveState:
-    """Current slave geometry from the nodal displacements ``U1`` (n, A, 3)."""
-    return state_of(frames.X + np.einsum("pa,pak->pk", frames.phi, U1),
-                    frames.A + np.einsum("pa,pak->pk", frames.ca, U1),
-                    frames.B + np.einsum("pa,pak->pk", frames.cb, U1))
-
-
 def state_of(x: np.ndarray, a: np.ndarray, b: np.ndarray) -> SlaveState:
     """The slave geometry of points at ``x`` with current tangents ``a``, ``b`` (n, 3 each)."""
     m = np.cross(a, b)

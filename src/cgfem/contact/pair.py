@@ -195,7 +195,8 @@ class ContactPair:
     # -- kinematics ------------------------------------------------------------------------
     def _slave(self, u_s: np.ndarray) -> SlaveState:
         """The current geometry of every slave point from the kinematic vector ``u_s``: the
-        sparse products of :meth:`_slave_maps` (the same sums as :func:`slave_state`)."""
+        sparse products of :meth:`_slave_maps`: ``x = X + phi . U1``, ``a = A + ca . U1``,
+        ``b = B + cb . U1``."""
         if self._maps is None or self._maps[0].shape[1] != u_s.size // 3:
             self._maps = self._slave_maps(u_s.size // 3)
         U = u_s.reshape(-1, 3)

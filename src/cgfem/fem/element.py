@@ -16,6 +16,7 @@ needs and its cell type are read from the element everywhere; no other module as
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -65,7 +66,7 @@ class Hexahedron:
         """(n_nodes, 3) local coordinates of the nodes in ``[-1, 1]^3``."""
         return -1.0 + (2.0 / self.order) * self.node_ijk
 
-    @property
+    @functools.cached_property
     def to_bernstein(self) -> np.ndarray:
         """(n_nodes, n_nodes) the map from nodal values to the coefficients of the same
         polynomial in the tensor-product Bernstein basis of the element's order (node
