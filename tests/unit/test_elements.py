@@ -118,3 +118,25 @@ def test_space_nodes_are_shared_across_faces(element):
             shared = np.intersect1d(space.connectivity[a], space.connectivity[b]).size
             assert shared == (p + 1) ** (3 - steps.sum()), (ijk[a], ijk[b])
     assert space.element_dofs.shape == (elements.size, element.n_dofs)
+
+
+@pytest.mark.parametrize("element", ELEMENTS, ids=lambda e: e.cell_type)
+def test_lebesgue_constant_and_bernstein_hull(element):
+    """``lebesgue`` is the maximum of sum |N_a| over the cube (reached at xi = +-1/2 at order 2),
+    and a random field on the element stays within the range of its Bernstein coefficients
+    (``to_bernstein``), which the nodal values alone do not bound at order 2."""
+    t = np.linspace(-1.0, 1.0, 41)
+    xi = np.stack(np.meshgrid(t, t, t, indexing="ij"), axis=-1).reshape(-1, 3)
+    N = element.tabulate(xi, H)[0]
+    assert np.abs(N).sum(axis=1).max() == pytest.approx(element.lebesgue, rel=1e-12)
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        u = rng.standard_normal(element.n_nodes)
+        b = element.to_bernstein @ u
+        v = N @ u
+        assert b.min() - 1e-12 <= v.min() and v.max() <= b.max() + 1e-12
+        # the Bernstein coefficients reproduce the field: at the corners they equal the values
+        np.testing.assert_allclose(b[:8], u[:8], atol=1e-12)
+    if element.order == 2:   # the quadratic field overshoots its nodal values somewhere
+        assert any((element.tabulate(xi, H)[0] @ u).max() > u.max() + 1e-9
+                   for u in rng.standard_normal((20, element.n_nodes)))
