@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from cgfem.embedding.grid import CartesianGrid
-from cgfem.fem.space import shape_functions
+from cgfem.fem.element import HEX8
 from cgfem.quadrature_rules import gauss_legendre, tensor_gauss
 
 
@@ -35,7 +35,7 @@ def cube():
 def test_basis_matches_lagrange_reference(cube):
     h, corner, centre = cube
     xi = np.random.default_rng(1).uniform(-1.0, 1.0, (500, 3))
-    N, dN = shape_functions(xi, h)
+    N, dN = HEX8.tabulate(xi, h)
     N_ref, dN_ref = _lagrange_reference(centre + 0.5 * h * xi, corner, h)
     assert N.shape == (500, 8) and dN.shape == (500, 8, 3)
     assert np.abs(N - N_ref).max() < 1e-14
@@ -45,7 +45,7 @@ def test_basis_matches_lagrange_reference(cube):
 def test_partition_of_unity_and_kronecker(cube):
     h, corner, centre = cube
     xi = np.random.default_rng(2).uniform(-1.3, 1.3, (400, 3))   # also outside the cube
-    N, dN = shape_functions(xi, h)
+    N, dN = HEX8.tabulate(xi, h)
     assert np.abs(N.sum(axis=1) - 1.0).max() < 1e-15
     assert np.abs(dN.sum(axis=1)).max() * h < 1e-14
     # linear completeness: sum_a N_a x_a = x and sum_a x_a (x) dN_a = I
@@ -53,19 +53,19 @@ def test_partition_of_unity_and_kronecker(cube):
     assert np.abs(N @ corner - x).max() < 1e-15
     assert np.abs(np.einsum("ai,paj->pij", corner, dN) - np.eye(3)).max() < 1e-13
     # at its own nodes (local coordinates from the grid's node positions) N_a = delta_ab
-    N_nodes, _ = shape_functions((corner - centre) / (0.5 * h), h)
+    N_nodes, _ = HEX8.tabulate((corner - centre) / (0.5 * h), h)
     assert np.abs(N_nodes - np.eye(8)).max() < 1e-15
 
 
 def test_gradients_match_central_differences(cube):
     h = cube[0]
     xi = np.random.default_rng(3).uniform(-1.0, 1.0, (200, 3))
-    _, dN = shape_functions(xi, h)
+    _, dN = HEX8.tabulate(xi, h)
     step = 1e-6
     for d in range(3):
         e = np.zeros(3)
         e[d] = step
-        fd = (shape_functions(xi + e, h)[0] - shape_functions(xi - e, h)[0]) / (2 * step) * (2.0 / h)
+        fd = (HEX8.tabulate(xi + e, h)[0] - HEX8.tabulate(xi - e, h)[0]) / (2 * step) * (2.0 / h)
         assert np.abs(fd - dN[:, :, d]).max() * h < 1e-9
 
 

@@ -39,7 +39,7 @@ from cgfem.contact.surfaces import locate_points
 from cgfem.embedding.export import write_vtu_files
 from cgfem.embedding.partition import SurfaceQuadrature
 from cgfem.errors import InputError
-from cgfem.fem.space import Space, shape_functions
+from cgfem.fem.space import Space
 from cgfem.geometry.io import solid_from_dict, write_solid
 from cgfem.geometry.nurbs import NurbsSurface
 from cgfem.geometry.refine import elevate_degree, refine_knots
@@ -164,7 +164,7 @@ def fe_shape_matrix(space: Space, x: np.ndarray) -> sp.csr_matrix:
     """(n, n_nodes) shape functions of ``space``'s element at points ``x`` (n, 3) (located
     in their active elements); a point in no active element is a ValueError."""
     slots, xi = locate_points(space, x)
-    N = shape_functions(xi, space.h, space.element)[0]
+    N = space.element.tabulate(xi, space.h)[0]
     n, k = N.shape
     return sp.csr_matrix((N.ravel(), space.connectivity[slots].ravel(), np.arange(0, k * n + 1, k)),
                          shape=(n, space.n_nodes))

@@ -56,7 +56,7 @@ from threadpoolctl import ThreadpoolController
 from cgfem.contact import _ray_kernels as _rk
 from cgfem.contact.kinematics import (SlaveFrames, SlaveState, area_weight, gap_derivatives,
                                       gap_gradient_direction, state_of)
-from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface, RayHits, shape_derivatives
+from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface, RayHits
 
 #: slave points whose (D, D) tangents (D = 48 for NURBS+FE and facets with trilinear
 #: elements, 162 with triquadratic ones) are formed at once at D = 48, and proportionally
@@ -265,8 +265,9 @@ class ContactPair:
         if self.slave_surface is None:      # the points' own FE interpolation
             N = self.frames.phi
         else:                               # the FE shape functions at the reference point
-            N = shape_derivatives((self.frames.X - self.slave_space.centres()[self.frames.slot])
-                                  / (0.5 * self.slave_space.h), self.slave_space.h, self.slave_space.element)[0]
+            space = self.slave_space
+            xi = (self.frames.X - space.centres()[self.frames.slot]) / (0.5 * space.h)
+            N = space.element.tabulate(xi, space.h)[0]
         stress = np.einsum("pa,paij->pij", N, recovered[conn])                  # (n, 3, 3)
         if self.finite:
             U = u_body.reshape(-1, 3)[conn]
@@ -481,4 +482,4 @@ def slave_gradients(space, frames: SlaveFrames) -> np.ndarray:
     """Shape gradients (n, n_nodes, 3) at the slave points (from their reference positions)."""
     centre = space.centres()[frames.slot]
     xi = (frames.X - centre) / (0.5 * space.h)
-    return shape_derivatives(xi, space.h, space.element)[1]
+    return space.element.tabulate(xi, space.h)[1]

@@ -39,7 +39,6 @@ from cgfem.contact import _ray_kernels as _rk
 from cgfem.contact._facet_kernels import triangle_hits
 from cgfem.contact.kinematics import MasterPoints, SlaveFrames
 from cgfem.embedding.partition import SurfaceQuadrature
-from cgfem.fem.element import HEX8, Hexahedron
 from cgfem.fem.space import LOCATE_TOL, Space
 from cgfem.geometry.nurbs import NurbsSurface
 from cgfem.geometry.solid import Solid
@@ -58,14 +57,6 @@ FACET_TOL = 1e-10
 #: facet hits of one ray whose gaps differ by less than this fraction of h are a tie
 #: (:meth:`FacetSurface._take`)
 TIE = 1e-12
-
-
-def shape_derivatives(xi: np.ndarray, h: float, element: Hexahedron = HEX8
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Shape functions (n, n_nodes), physical gradients (n, n_nodes, 3) and physical second
-    derivatives (n, n_nodes, 3, 3) of ``element`` at local coordinates ``xi`` (n, 3) of a cube
-    of size ``h`` (:meth:`cgfem.fem.element.Hexahedron.tabulate`)."""
-    return element.tabulate(xi, h, second=True)
 
 
 def element_values(space: Space, u: np.ndarray, slots: np.ndarray) -> np.ndarray:
@@ -330,7 +321,7 @@ element of its space)."""
         for pid in np.unique(self.seed_piece):
             rows = self.seed_piece == pid
             self._seed_X[rows] = solid.patches[pid].surface.evaluate(self.seed_theta[rows])
-        N = shape_derivatives(self._seed_xi, self.h, space.element)[0]
+        N = space.element.tabulate(self._seed_xi, self.h)[0]
         k = N.shape[1]
         #: the seeds' shape functions as a sparse (n_seeds, n_nodes) matrix: their positions
         #: are one sparse product per search (gathering (n_seeds, n_nodes, 3) values was a
@@ -350,7 +341,7 @@ element of its space)."""
             d = self.solid.patches[pid].surface.derivatives(rule.uv[rows], 1)
             A[rows], B[rows] = d[:, 1, 0], d[:, 0, 1]
         slots, xi = locate_points(self.space, rule.x)
-        N, dN, _ = shape_derivatives(xi, self.h, self.space.element)
+        N, dN = self.space.element.tabulate(xi, self.h)
         ca = np.einsum("paj,pj->pa", dN, A)
         cb = np.einsum("paj,pj->pa", dN, B)
         return SlaveFrames(slots, self.space.connectivity[slots], rule.x.copy(), A, B, N, ca, cb, rule.w.copy())
@@ -377,7 +368,7 @@ element of its space)."""
         else:
             slots = np.asarray(slot, np.int64)
             xi = (X - self._centres[slots]) / (0.5 * self.h)
-        N, dN, d2N = shape_derivatives(xi, self.h, self.space.element)
+        N, dN, d2N = self.space.element.tabulate(xi, self.h, second=True)
         U = element_values(self.space, u, np.maximum(slots, 0))
         psi = np.einsum("paj,pcj->pca", dN, Qt)                     # dN . Q_alpha  (n, 2, n_nodes)
         x = X + np.einsum("pa,pak->pk", N, U)
@@ -472,7 +463,7 @@ class FacetSurface:
             raise ValueError("facet triangle in an inactive element")
         centre = space.centres()[self.slot]
         xi = (self.triangles - centre[:, None, :]) / (0.5 * space.h)
-        self.vertex_N = shape_derivatives(xi.reshape(-1, 3), space.h, space.element)[0].reshape(
+        self.vertex_N = space.element.tabulate(xi.reshape(-1, 3), space.h)[0].reshape(
             -1, 3, space.element.n_nodes)
         self.candidates = np.flatnonzero(keep)
 

@@ -23,18 +23,11 @@ from cgfem.fem import _element_kernels as kern
 from cgfem.fem._element_kernels import NODE_XI
 from cgfem.fem.element import HEX8, Hexahedron
 
-__all__ = ["NODE_XI", "ElementPoints", "Space", "element_mesh", "shape_functions"]
+__all__ = ["NODE_XI", "ElementPoints", "Space", "element_mesh"]
 
 #: distance (in units of h) from a grid plane within which :meth:`Space.locate` also looks
 #: for a point in the element across the plane
 LOCATE_TOL = 1e-10
-
-
-def shape_functions(xi: np.ndarray, h: float, element: Hexahedron = HEX8) -> tuple[np.ndarray, np.ndarray]:
-    """Shape functions ``N`` (n, n_nodes) and their physical gradients ``dN`` (n, n_nodes, 3),
-    ``dN[p, a, J] = dN_a/dX_J``, of ``element`` at local coordinates ``xi`` (n, 3) of a cube
-    of size ``h`` (:meth:`cgfem.fem.element.Hexahedron.tabulate`)."""
-    return element.tabulate(xi, h)
 
 
 def element_mesh(grid: CartesianGrid, elements: np.ndarray, element: Hexahedron = HEX8
@@ -188,7 +181,7 @@ class Space:
 
     def interpolate(self, nodal: np.ndarray, slots: np.ndarray, xi: np.ndarray) -> np.ndarray:
         """Values at points of a nodal field ``nodal`` (n_nodes, ...)."""
-        n = shape_functions(xi, self.h, self.element)[0]
+        n = self.element.tabulate(xi, self.h)[0]
         values = nodal[self.connectivity[slots]]
         return np.einsum("pa,pa...->p...", n, values)
 
