@@ -172,10 +172,10 @@ def test_facets_converge_with_both_grids_moved(tmp_path, planar_reference):
     0.038, force -12.6 / -5.0 / -2.9 / -1.6 % (nurbs_fe: 0.090 / 0.046 / 0.024, exact)."""
     import yaml
 
-    from cgfem.case.load import parse_case
+    from cgfem.case.load import parse_case, parse_yaml
     from cgfem.report.energy import TOTAL, energy_errors, reference_error
 
-    data = yaml.safe_load(CASE.read_text())
+    data = parse_yaml(CASE.read_text())
     for body, offset in MOVED_GRIDS.items():
         data["bodies"][body]["grid"]["offset"] = offset
     case_file = tmp_path / "planar_moved.yaml"
