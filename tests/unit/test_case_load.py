@@ -26,6 +26,7 @@ from cgfem.case import (
     parse_yaml,
 )
 from cgfem.errors import InputError
+from cgfem.fem.element import HEX8, HEX27
 from cgfem.geometry.specs import BoxSpec, CylinderSpec, HalfTorusSpec, NurbsFileSpec, SphereSpec, TorusSpec
 
 from tests.support.cases import PLANAR
@@ -109,8 +110,13 @@ def test_schema_is_valid_and_its_defaults_match_the_dataclasses() -> None:
     solver = schema["$defs"]["solver"]["properties"]
     defaults = SolverOptions()
     names = ("newton_tol", "max_newton", "outer_passes", "linear", "outer_tol", "max_cutbacks",
-             "kappa_dirichlet", "ghost_penalty")
-    assert {k: v["default"] for k, v in solver.items()} == {n: getattr(defaults, n) for n in names}
+             "kappa_dirichlet")
+    assert {k: v["default"] for k, v in solver.items() if k != "ghost_penalty"} == \
+        {n: getattr(defaults, n) for n in names}
+    # the ghost penalty's default is the element's, named in the description
+    assert "default" not in solver["ghost_penalty"] and defaults.ghost_penalty is None
+    assert f"{HEX8.ghost_penalty} at order 1" in solver["ghost_penalty"]["description"]
+    assert f"{HEX27.ghost_penalty} at order 2" in solver["ghost_penalty"]["description"]
     assert schema["$defs"]["contactPair"]["properties"]["kappa"]["default"] == ContactPair.kappa
     assert tuple(schema["$defs"]["grid"]["properties"]["offset"]["default"]) == GridSpec.offset
     assert schema["properties"]["steps"]["default"] == 1

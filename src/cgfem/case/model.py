@@ -246,7 +246,8 @@ class SolverOptions:
     outer-loop tolerance on the recovered stress and its cap ``outer_passes`` (a step whose
     loop reaches the cap above ``outer_tol`` is reported ``outer_converged: false``), the
     number of step cut-backs, and the weak-Dirichlet (``kappa_dirichlet``) and
-    ghost-penalty parameters."""
+    ghost-penalty parameters (``ghost_penalty`` None: the element's own,
+    :attr:`cgfem.fem.element.Hexahedron.ghost_penalty`)."""
 
     newton_tol: float = 1e-9
     max_newton: int = 30
@@ -255,7 +256,7 @@ class SolverOptions:
     outer_tol: float = 1e-6
     max_cutbacks: int = 5
     kappa_dirichlet: float = 10.0
-    ghost_penalty: float = 0.05
+    ghost_penalty: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("newton_tol", "outer_tol", "kappa_dirichlet"):
@@ -263,10 +264,11 @@ class SolverOptions:
             if not value > 0.0:
                 raise InputError(name, f"must be > 0, got {getattr(self, name)!r}")
             object.__setattr__(self, name, value)
-        gamma = _finite("ghost_penalty", self.ghost_penalty)
-        if gamma < 0.0:
-            raise InputError("ghost_penalty", f"must be >= 0, got {self.ghost_penalty!r}")
-        object.__setattr__(self, "ghost_penalty", gamma)
+        if self.ghost_penalty is not None:
+            gamma = _finite("ghost_penalty", self.ghost_penalty)
+            if gamma < 0.0:
+                raise InputError("ghost_penalty", f"must be >= 0, got {self.ghost_penalty!r}")
+            object.__setattr__(self, "ghost_penalty", gamma)
         _count("max_newton", self.max_newton)
         _count("outer_passes", self.outer_passes)
         if isinstance(self.max_cutbacks, bool) or not isinstance(self.max_cutbacks, int) \

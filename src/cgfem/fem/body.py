@@ -34,7 +34,8 @@ class BodyModel:
     embedding: Embedding
     pattern: Pattern
     elasticity: Elasticity
-    ghost: sp.csr_matrix
+    ghost: sp.csr_matrix             # (n_dofs, n_dofs) the ghost penalty of parameter gamma
+    gamma: float                     # the ghost-penalty parameter it was built with
     dirichlet: list[WeakDirichlet]
     load: np.ndarray                 # (n_dofs,) dead loads at load factor 1
     recovery: spr.Recovery
@@ -47,7 +48,8 @@ class BodyModel:
               finite: bool, element: Hexahedron = HEX8) -> "BodyModel":
         """The model of ``body`` on ``embedding`` with ``element`` and the case's ``boundary``
         entries that name it (each a :class:`DisplacementBC` or :class:`TractionBC`);
-        ``options`` gives the weak-Dirichlet and ghost-penalty parameters. In small strain
+        ``options`` gives the weak-Dirichlet and ghost-penalty parameters (the element's own
+        ``gamma`` unless the options set one). In small strain
         every material is its linearization (linear elastic with the same E and nu). The
         embedding's rules must integrate the element's degree (``embedding.degree >=
         element.degree``), else ``ValueError``."""
@@ -58,7 +60,8 @@ class BodyModel:
         space = Space.from_embedding(embedding, element)
         lam, mu = body.material.lame()          # Lame(lam, mu)
         model = model_id(body.material.model) if finite else LINEAR_ELASTIC
-        G, extra = ghost_penalty(space, options.ghost_penalty, lam + 2.0 * mu)
+        gamma = element.ghost_penalty if options.ghost_penalty is None else options.ghost_penalty
+        G, extra = ghost_penalty(space, gamma, lam + 2.0 * mu)
         pattern = build_pattern(space, extra)
         volume = space.volume_points(embedding)
         elasticity = Elasticity(space, pattern, volume, model, mu, lam)
@@ -75,7 +78,7 @@ class BodyModel:
                 dirichlet.append(WeakDirichlet.build(label, space, pattern, points, bc.components, beta))
             elif isinstance(bc, TractionBC):
                 load += traction_load(space, points, bc.value)
-        return cls(body.name, space, embedding, pattern, elasticity, G, dirichlet, load,
+        return cls(body.name, space, embedding, pattern, elasticity, G, gamma, dirichlet, load,
                    spr.build_recovery(space))
 
     @property

@@ -34,11 +34,14 @@ class Hexahedron:
     order : polynomial order per variable
     node_ijk : (n_nodes, 3) int64 tensor indices of the nodes, each in ``0..order``
     cell_type : the meshio cell type of ``step_NNN.vtu`` (``hexahedron``, ``hexahedron27``)
+    ghost_penalty : the default ghost-penalty parameter ``gamma`` of this element (the case's
+        ``solver.ghost_penalty`` overrides it; :mod:`cgfem.fem.ghost`)
     """
 
     order: int
     node_ijk: np.ndarray = field(repr=False)
     cell_type: str
+    ghost_penalty: float
 
     @property
     def n_nodes(self) -> int:
@@ -118,9 +121,9 @@ def _bernstein_map(order: int, node_ijk: np.ndarray) -> np.ndarray:
 
 
 #: the trilinear hexahedron (H8), the paper's element
-HEX8 = Hexahedron(1, kern.HEX8_IJK, "hexahedron")
+HEX8 = Hexahedron(1, kern.HEX8_IJK, "hexahedron", ghost_penalty=0.05)
 #: the triquadratic Lagrange hexahedron (27 nodes, VTK's node order)
-HEX27 = Hexahedron(2, kern.HEX27_IJK, "hexahedron27")
+HEX27 = Hexahedron(2, kern.HEX27_IJK, "hexahedron27", ghost_penalty=0.01)
 #: the element of each order ``cgfem run --order`` accepts
 ORDERS = {1: HEX8, 2: HEX27}
 
