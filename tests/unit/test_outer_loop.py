@@ -125,3 +125,18 @@ def test_anderson_solves_an_affine_map_of_low_rank_exactly():
     assert np.abs(x - x0).max() <= 1e-12
     recovered = [x0]
     assert Anderson().next([None], recovered) is recovered     # nothing frozen yet: the recovery
+
+
+def test_anderson_passes_a_broken_recovery_on_and_starts_afresh():
+    """A NaN in the recovered stress (a pass that broke) is handed on unmixed, for Newton
+    to fail on and the increment to be cut back, and the mixing history restarts: no
+    least-squares solve on NaN (numpy's SVD raised LinAlgError there)."""
+    from cgfem.solve.outer import Anderson
+    anderson = Anderson(depth=3)
+    x = [np.ones((2, 3, 3))]
+    anderson.next(x, [0.5 * x[0]])
+    broken = [np.full((2, 3, 3), np.nan)]
+    assert anderson.next(x, broken) is broken
+    assert anderson._f == [] and anderson._g == []
+    fine = [0.25 * x[0]]
+    assert anderson.next(x, fine) is fine                   # one pass again: nothing to mix

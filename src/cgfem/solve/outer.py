@@ -124,6 +124,10 @@ class Anderson:
             return recovered
         g = np.concatenate([r.ravel() for r in recovered])
         f = g - np.concatenate([x.ravel() for x in frozen])
+        if not np.all(np.isfinite(f)):      # a broken pass: no mixing; Newton meets the NaN
+            self._f.clear()
+            self._g.clear()
+            return recovered
         self._f.append(f)
         self._g.append(g)
         del self._f[:-self.depth - 1], self._g[:-self.depth - 1]
