@@ -31,9 +31,10 @@ def box_case(boundary: list, *, material: dict, kinematics: str = "small", steps
     return parse_case(data, Path("."))
 
 
-def uniform_stress_case(sigma: np.ndarray, E: float, nu: float, offset) -> tuple[Case, np.ndarray]:
-    """Unit box with u = eps x on the three low faces and sigma . n on the three high ones;
-    returns the case and the strain ``eps``."""
+def uniform_stress_case(sigma: np.ndarray, E: float, nu: float, offset,
+                        solver: dict | None = None) -> tuple[Case, np.ndarray]:
+    """Unit box with u = eps x on the three low faces and sigma . n on the three high ones
+    (``solver``: options over :func:`box_case`'s); returns the case and the strain ``eps``."""
     lam = E * nu / ((1 + nu) * (1 - 2 * nu))
     mu = E / (2 * (1 + nu))
     eps = (sigma - lam / (3 * lam + 2 * mu) * np.trace(sigma) * np.eye(3)) / (2 * mu)
@@ -42,5 +43,5 @@ def uniform_stress_case(sigma: np.ndarray, E: float, nu: float, offset) -> tuple
     loads = [{"patches": [p], "type": "traction", "value": [_num(v) for v in sigma[:, a]]}
              for a, p in enumerate(("xmax", "ymax", "zmax"))]
     case = box_case([fixed, *loads], material={"model": "linear_elastic", "E": E, "nu": nu},
-                    offset=offset)
+                    offset=offset, solver=solver)
     return case, eps
