@@ -182,6 +182,11 @@ class ContactPair:
     def __post_init__(self) -> None:
         self.state = ContactState(np.zeros(self.frames.size))
         self._maps = None
+        # (n, n_nodes) the slave's FE shape functions at its points, where :meth:`freeze`
+        # reads the recovered stress: the points' own interpolation, or (a fitted surface)
+        # the FE element's at the reference point
+        self._stress_N = self.frames.phi if self.slave_surface is None else \
+            self.slave_space.element.tabulate(_reference_xi(self.slave_space, self.frames), self.slave_space.h)[0]
 
     @property
     def n_points(self) -> int:
@@ -262,13 +267,7 @@ class ContactPair:
             return
         st = self._slave(u_s)
         conn = self.slave_space.connectivity[self.frames.slot]
-        if self.slave_surface is None:      # the points' own FE interpolation
-            N = self.frames.phi
-        else:                               # the FE shape functions at the reference point
-            space = self.slave_space
-            xi = (self.frames.X - space.centres()[self.frames.slot]) / (0.5 * space.h)
-            N = space.element.tabulate(xi, space.h)[0]
-        stress = np.einsum("pa,paij->pij", N, recovered[conn])                  # (n, 3, 3)
+        stress = np.einsum("pa,paij->pij", self._stress_N, recovered[conn])      # (n, 3, 3)
         if self.finite:
             U = u_body.reshape(-1, 3)[conn]
             F = np.eye(3) + np.einsum("pak,paj->pkj", U, self.grad_N)
@@ -478,8 +477,11 @@ def _slots(hits: RayHits, rows: np.ndarray) -> np.ndarray | None:
     return None if hits.slot is None else hits.slot[rows]
 
 
+def _reference_xi(space, frames: SlaveFrames) -> np.ndarray:
+    """(n, 3) local coordinates of the slave points' reference positions in their elements."""
+    return (frames.X - space.centres()[frames.slot]) / (0.5 * space.h)
+
+
 def slave_gradients(space, frames: SlaveFrames) -> np.ndarray:
     """Shape gradients (n, n_nodes, 3) at the slave points (from their reference positions)."""
-    centre = space.centres()[frames.slot]
-    xi = (frames.X - centre) / (0.5 * space.h)
-    return space.element.tabulate(xi, space.h)[1]
+    return space.element.tabulate(_reference_xi(space, frames), space.h)[1]
