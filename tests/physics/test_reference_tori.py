@@ -66,7 +66,8 @@ def test_crossed_tori_under_a_small_load_follow_hertz():
     both surfaces have the principal curvatures 1/r and -1/(R - r) in crossed planes, so the
     contact is Hertz's circle with the equivalent radius R* = 1 / (1/r - 1/(R - r)) and
     E* = E / (2 (1 - nu^2)): a^3 = 3 F R* / (4 E*). The contact radius is measured from the
-    second moment of the contact pressure (Hertz: <rho^2> = 2 a^2 / 5) and matches to 2 %."""
+    second moment of the contact pressure (Hertz: <rho^2> = 2 a^2 / 5) and matches to 2 %;
+    the reported extent of the contact zone lies between ``a`` and the refined radius."""
     import ngsolve as ng
 
     case = _hertz_case(4.0e-5)
@@ -84,3 +85,6 @@ def test_crossed_tori_under_a_small_load_follow_hertz():
     a_hertz = (3.0 * force * r_star / (4.0 * e_star)) ** (1.0 / 3.0)
     assert a / r < 0.15                                        # small against the tube: Hertz applies
     assert a == pytest.approx(a_hertz, rel=0.02)
+    # the contact zone's reported extent holds Hertz's circle and lies in the refined ball
+    extent = solution.steps[-1].contact_extent["link_b/link_a"]
+    assert a_hertz <= extent <= problem.spec.r_contact

@@ -14,6 +14,15 @@ uncertainty:
   times ``PENALTY_STEP`` (10), from its converged state (a continuation in the penalty);
   the change of the reactions is the penalty uncertainty.
 
+The meshes are refined to ``h_contact`` within ``--r-contact`` of the touch points
+(default ``R_CONTACT``, 4 mm); every step records the extent of its contact zone (the
+largest reference distance from the touch point of a tube vertex carrying contact,
+:meth:`cgfem.reference.tori_solve.ToriProblem.contact_forces`), and the study reports the
+finest run's largest, which must lie within ``r_contact`` plus one contact element
+(``h_contact``: the vertices carrying contact reach one element beyond the zone) for the
+refinement to cover the zone (the rubber links are pulled far into each other: chain2_rubber's zone reaches about
+6 mm, so its study takes ``--r-contact 0.007``).
+
 The reference is **accepted** when both are below ``ACCEPT`` (0.3 %). The values of the
 reference are the finest level's at the nominal penalty, per load step: the reactions on
 the supports (``body/patch+patch`` as in cgFEM's summaries, the force of the support on the
@@ -31,7 +40,7 @@ command if not).
 Command line::
 
     python3 -m cgfem.reference.tori --case chain2_steel --out results/reference/chain2_steel.json \\
-        [--meshes 1,2,3,4] [--order 2] [--penalty-factor 10000] [--threads 1]
+        [--meshes 1,2,3,4] [--order 2] [--penalty-factor 10000] [--r-contact 0.004] [--threads 1]
     python3 -m cgfem.reference.tori --case chain2_steel --from-gold config/reference/chain2_steel.json \\
         --out results/reference/chain2_steel.json
 
@@ -59,7 +68,7 @@ import numpy as np
 from cgfem.atomic import write_text_atomic
 from cgfem.case import load_case
 from cgfem.errors import InputError
-from cgfem.reference.tori_geometry import check_symmetry, mesh_level
+from cgfem.reference.tori_geometry import R_CONTACT, check_symmetry, mesh_level
 
 __all__ = ["ACCEPT", "PENALTY_FACTOR", "PENALTY_STEP", "SCHEMA", "StaleGold", "changes",
            "check_gold", "main", "script_version", "study"]
@@ -173,9 +182,15 @@ def _entries(case) -> dict[str, str]:
     return roles
 
 
+def _extent(run: dict) -> float:
+    """Largest contact-zone extent (m) of a run over its steps and pairs (0 without contact)."""
+    return max((v for step in run["steps"] for v in step["contact_extent"].values()), default=0.0)
+
+
 def study(case_path: Path, meshes: tuple[int, ...], order: int, penalty_factor: float,
-          log: Callable[[str], None], command: str = "") -> dict:
-    """Solve ``case_path`` on every mesh level, on the finest also with the penalty times
+          log: Callable[[str], None], command: str = "", r_contact: float = R_CONTACT) -> dict:
+    """Solve ``case_path`` on every mesh level (refined to ``h_contact`` within
+    ``r_contact`` m of the touch points), on the finest also with the penalty times
     ``PENALTY_STEP``; the reference JSON (see the module)."""
     from cgfem.reference.tori_solve import solve
     import netgen
@@ -188,9 +203,9 @@ def study(case_path: Path, meshes: tuple[int, ...], order: int, penalty_factor: 
     levels = sorted(meshes)
     for level in levels:
         finest = level == levels[-1]
-        log(f"{case.name}: mesh level {level}, order {order}, penalty factor {penalty_factor:g}"
-            + (f" (and times {PENALTY_STEP:g})" if finest else ""))
-        solution = solve(case, mesh_level(level, order), penalty_factor, log=log,
+        log(f"{case.name}: mesh level {level}, order {order}, penalty factor {penalty_factor:g}, "
+            f"r_contact {r_contact:g} m" + (f" (and times {PENALTY_STEP:g})" if finest else ""))
+        solution = solve(case, mesh_level(level, order, r_contact), penalty_factor, log=log,
                          check_factor=PENALTY_STEP if finest else None)
         runs.append({"level": level, **solution.as_dict()})
         check = solution.check
@@ -198,6 +213,7 @@ def study(case_path: Path, meshes: tuple[int, ...], order: int, penalty_factor: 
     penalty_run = {"level": finest["level"], **check.as_dict()}
     mesh_rows = [{"level": r["level"], "dofs": r["mesh"]["dofs"], "elements": r["mesh"]["elements"],
                   "h": r["mesh"]["h"], "h_contact": r["mesh"]["h_contact"],
+                  "r_contact": r["mesh"]["r_contact"], "contact_extent": _extent(r),
                   "final_reactions": r["steps"][-1]["reactions"] if r["steps"] else None,
                   "change_to_finest": changes(r, finest),
                   "von_mises_change_to_finest": _peak_change(r, finest)} for r in runs]
@@ -236,6 +252,8 @@ def study(case_path: Path, meshes: tuple[int, ...], order: int, penalty_factor: 
             "mesh_extrapolated": mesh_extrapolated,
             "mesh": mesh_u,
             "penalty": penalty_u,
+            "contact_extent": _extent(finest),
+            "r_contact": r_contact,
             "accept_below": ACCEPT,
             "accepted": accepted,
         },
@@ -268,7 +286,8 @@ def check_gold(gold: Path, case_path: Path) -> dict:
 
 def verdict(data: dict) -> str:
     u = data["uncertainty"]
-    return (f"{data['case']}: mesh uncertainty {u['mesh']:.3%} (change {u['mesh_change']:.3%}, "
+    return (f"{data['case']}: contact zone {u['contact_extent'] * 1e3:.2f} mm within r_contact "
+            f"{u['r_contact'] * 1e3:.2f} mm; mesh uncertainty {u['mesh']:.3%} (change {u['mesh_change']:.3%}, "
             f"extrapolated {u['mesh_extrapolated']:.3%}), penalty change {u['penalty']:.3%} "
             f"(accept below {u['accept_below']:.1%}): {'ACCEPTED' if u['accepted'] else 'NOT ACCEPTED'}")
 
@@ -293,6 +312,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--order", type=int, default=2, help="element order >= 2 (default 2)")
     parser.add_argument("--penalty-factor", type=float, default=PENALTY_FACTOR,
                         help="eps = factor E_slave / r_slave (default %(default)g)")
+    parser.add_argument("--r-contact", type=float, default=R_CONTACT,
+                        help="radius (m) about the touch points meshed at h_contact; must hold "
+                             "the contact zone of the last load step (default %(default)g)")
     parser.add_argument("--threads", type=int, default=1, help="NGSolve threads (default 1)")
     parser.add_argument("--from-gold", metavar="GOLD", help="check a gold file and copy it to --out")
     argv = sys.argv[1:] if argv is None else argv
@@ -305,6 +327,8 @@ def main(argv: list[str] | None = None) -> int:
             raise InputError("--order", f"must be >= 2, got {args.order}")
         if not args.penalty_factor > 0.0:
             raise InputError("--penalty-factor", f"must be > 0, got {args.penalty_factor}")
+        if not args.r_contact > 0.0:
+            raise InputError("--r-contact", f"must be > 0, got {args.r_contact}")
         if args.threads < 1:
             raise InputError("--threads", f"must be >= 1, got {args.threads}")
         levels = _levels(args.meshes)
@@ -331,7 +355,8 @@ def main(argv: list[str] | None = None) -> int:
         command = "python3 -m cgfem.reference.tori " + " ".join(shlex.quote(a) for a in argv)
         ngsolve.SetNumThreads(args.threads)
         with ngsolve.TaskManager():
-            data = study(case_path, levels, args.order, args.penalty_factor, log, command)
+            data = study(case_path, levels, args.order, args.penalty_factor, log, command,
+                         args.r_contact)
     out.parent.mkdir(parents=True, exist_ok=True)
     write_text_atomic(out, json.dumps(data, indent=1) + "\n")
     print(verdict(data), file=sys.stderr)

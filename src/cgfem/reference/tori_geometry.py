@@ -75,7 +75,9 @@ LEVEL_FACTOR = 2.0 ** -0.5
 
 def mesh_level(level: int, order: int = 2, r_contact: float = R_CONTACT) -> MeshSpec:
     """The reference mesh ``level``: ``h = 4 mm`` and ``h_contact = 1 mm`` at level 0,
-    both divided by ``sqrt 2`` per level (about 2.8 times the elements per level)."""
+    both divided by ``sqrt 2`` per level (about 2.8 times the elements per level);
+    ``h_contact`` within ``r_contact`` (m, the same on every level) of the touch points,
+    which must hold the contact zone of every load step (the study reports its extent)."""
     if level < 0:
         raise InputError("level", f"must be >= 0, got {level}")
     f = LEVEL_FACTOR ** level

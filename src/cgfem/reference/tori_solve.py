@@ -32,7 +32,9 @@ and z components zero): the reaction (N) of every support entry, keyed like cgFE
 (largest resultant of its support and contact forces relative to the largest support
 force), the peak von Mises stress (Pa, Cauchy) of every body on a lattice of points per
 element and where it is (reference coordinates, in the quarter), also on either side of
-the body's centre plane ``y = c_y``.
+the body's centre plane ``y = c_y``; and the extent of every pair's contact zone (m: the
+largest distance, in the reference configuration, from the pair's touch point to a tube
+vertex carrying contact), which tells whether the mesh's refined ball holds the zone.
 """
 
 from __future__ import annotations
@@ -44,7 +46,7 @@ from typing import Callable
 import numpy as np
 
 from cgfem.case import Case
-from cgfem.reference.tori_geometry import SYM_X, SYM_Z, MeshSpec, build_mesh, cap, tube
+from cgfem.reference.tori_geometry import SYM_X, SYM_Z, MeshSpec, build_mesh, cap, touch_points, tube
 
 __all__ = ["SYMMETRY_FACTOR", "Solution", "StepResult", "ToriProblem", "solve"]
 
@@ -71,6 +73,9 @@ STALL_FACTOR = 1e3
 #: converges linearly (chain2_rubber at level 2, last step: a factor 0.75 per iteration,
 #: 3.7e-8 of the support forces after 40)
 CHECK_ITERATIONS_FACTOR = 2
+#: a tube vertex carries contact when its nodal contact force exceeds this fraction of the
+#: pair's largest one (penalty pressures fade continuously to zero at the zone's edge)
+CONTACT_CUTOFF = 1e-6
 
 
 @dataclass
@@ -89,6 +94,7 @@ class StepResult:
     residual_reference: float
     cutbacks: int
     seconds: float
+    contact_extent: dict[str, float] = field(default_factory=dict)
     spring_force: dict[str, float] = field(default_factory=dict)
 
     def as_dict(self) -> dict:
@@ -170,6 +176,9 @@ class ToriProblem:
             self.pairs.append((key, pair, self._contact(trial, pair, eps), self._contact(trial, pair, eps),
                                ng.BilinearForm(fes, symmetric=True)))
         self._supports = [(bc, _entry_key(bc)) for bc in case.boundary]
+        self._touch = dict(zip((key for key, *_ in self.pairs), touch_points(case)))
+        self._vertex_dofs = np.array([fes.GetDofNrs(ng.NodeId(ng.VERTEX, i)) for i in range(mesh.nv)], int)
+        self._vertices = np.array([v.point for v in mesh.vertices], float)
         self._prescribed = self._prescribed_vectors()
 
     # -- forms ------------------------------------------------------------------------------
@@ -361,8 +370,13 @@ class ToriProblem:
             out[key] = [0.0, fy, 0.0]
         return out
 
-    def contact_forces(self) -> dict[str, dict]:
-        out = {}
+    def contact_forces(self) -> tuple[dict[str, dict], dict[str, float]]:
+        """Per pair: the y contact forces on the slave and on the master, and the contact
+        zone's extent (m): the largest distance, in the reference configuration, from the
+        pair's touch point (:func:`touch_points`) to a vertex of either tube whose nodal
+        contact force exceeds ``CONTACT_CUTOFF`` of the largest. The nodal forces reach one
+        element beyond the zone, so the zone lies within the extent."""
+        out, extent = {}, {}
         self._update_pairs(self.a, keep=True, final=True)
         for key, pair, cb, cb_alone, form in self.pairs:
             cb_alone.Update(self.u, form, self.contact_order, other=cb)
@@ -371,7 +385,11 @@ class ToriProblem:
             for body in (pair.slave, pair.master):
                 on[body] = -SYMMETRY_FACTOR * float(res @ self._unit(self.mesh.Materials(body), 1))
             out[key] = {"force": [0.0, on[pair.slave], 0.0], "on_master": [0.0, on[pair.master], 0.0]}
-        return out
+            nodal = np.linalg.norm(res[self._vertex_dofs], axis=1)
+            loaded = nodal > CONTACT_CUTOFF * nodal.max() if nodal.max() > 0.0 else nodal > 0.0
+            distance = np.linalg.norm(self._vertices[loaded] - self._touch[key], axis=1)
+            extent[key] = float(distance.max()) if distance.size else 0.0
+        return out, extent
 
     def spring_forces(self) -> dict[str, float]:
         """y force (N, whole chain) the springs of the floating bodies would carry at ``u``."""
@@ -485,10 +503,11 @@ class ToriProblem:
                 seconds: float) -> StepResult:
         """The values of the converged state at ``load_factor``."""
         peak, where, sides = self.peak_von_mises()
-        reactions, contact = self.reactions(), self.contact_forces()
+        reactions = self.reactions()
+        contact, extent = self.contact_forces()
         return StepResult(load_factor, reactions, contact, peak, where, sides,
                           self.equilibrium(reactions, contact), its, rn, ref, cuts, seconds,
-                          self.spring_forces())
+                          extent, self.spring_forces())
 
     def contact_work(self, key: str, field) -> float:
         """Work (J, whole chain) of the contact traction of pair ``key`` (``slave/master``) on
