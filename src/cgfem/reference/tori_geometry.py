@@ -16,8 +16,10 @@ space of a half torus and by the two symmetry half spaces. Its boundary faces ar
 
 Meshes are netgen tetrahedra of maximal size ``h`` (m), refined to ``h_contact`` within
 ``r_contact`` of the points where the tubes touch in the reference configuration
-(:func:`touch_points`), and curved to the element order (``Mesh.Curve``): the geometry
-error of the curved mesh is ``O(h^(p+1))``.
+(:func:`touch_points`) and along the cap edges, the circles where a half torus's caps meet its
+tube (:func:`cap_edge_points`; the solution is singular there, and an unrefined edge sets the
+rate at which a nearly incompressible link's reaction converges), and curved to the element
+order (``Mesh.Curve``): the geometry error of the curved mesh is ``O(h^(p+1))``.
 """
 
 from __future__ import annotations
@@ -30,8 +32,8 @@ from cgfem.case import Case
 from cgfem.errors import InputError
 from cgfem.geometry.specs import HalfTorusSpec, TorusSpec
 
-__all__ = ["MeshSpec", "SYM_X", "SYM_Z", "build_mesh", "cap", "check_symmetry", "mesh_level",
-           "quarter_solid", "touch_points", "tube"]
+__all__ = ["MeshSpec", "SYM_X", "SYM_Z", "build_mesh", "cap", "cap_edge_points",
+           "check_symmetry", "mesh_level", "quarter_solid", "touch_points", "tube"]
 
 SYM_X = "sym_x"
 SYM_Z = "sym_z"
@@ -56,7 +58,7 @@ def cap(body: str) -> str:
 @dataclass(frozen=True)
 class MeshSpec:
     """Mesh size ``h`` (m) everywhere, ``h_contact`` (m) within ``r_contact`` (m) of the
-    touch points, element order ``order`` (>= 2: curved elements)."""
+    touch points and along the cap edges, element order ``order`` (>= 2: curved elements)."""
 
     h: float
     h_contact: float
@@ -77,7 +79,8 @@ def mesh_level(level: int, order: int = 2, r_contact: float = R_CONTACT) -> Mesh
     """The reference mesh ``level``: ``h = 4 mm`` and ``h_contact = 1 mm`` at level 0,
     both divided by ``sqrt 2`` per level (about 2.8 times the elements per level);
     ``h_contact`` within ``r_contact`` (m, the same on every level) of the touch points,
-    which must hold the contact zone of every load step (the study reports its extent)."""
+    which must hold the contact zone of every load step (the study reports its extent), and
+    along the cap edges."""
     if level < 0:
         raise InputError("level", f"must be >= 0, got {level}")
     f = LEVEL_FACTOR ** level
@@ -220,6 +223,24 @@ def _surface_samples(spec: TorusSpec, centre: np.ndarray, radius: float, step: f
     return x[np.linalg.norm(x - centre, axis=1) <= radius]
 
 
+def cap_edge_points(spec: TorusSpec, step: float) -> np.ndarray:
+    """Points (m, 3) of the cap edges of ``spec`` about ``step`` apart, in the quarter
+    ``x >= 0, z >= 0``; none for a full torus. A half torus is cut by the plane through its
+    centre with normal ``keep``, which meets the tube in two circles of radius ``r`` about
+    ``c +- R e``, ``e = axis x keep``, in the plane spanned by ``e`` and the axis."""
+    if not isinstance(spec, HalfTorusSpec):
+        return np.zeros((0, 3))
+    a = np.asarray(spec.axis, float)
+    e = np.cross(a, np.asarray(spec.keep, float))
+    e /= np.linalg.norm(e)
+    phi = np.linspace(0.0, 2.0 * np.pi, max(8, int(np.ceil(2.0 * np.pi * spec.minor_radius / step))),
+                      endpoint=False)[:, None]
+    ring = spec.minor_radius * (np.cos(phi) * e + np.sin(phi) * a)
+    c = np.asarray(spec.center, float)
+    x = np.concatenate([c + sign * spec.major_radius * e + ring for sign in (1.0, -1.0)])
+    return x[(x[:, 0] >= -1e-12) & (x[:, 2] >= -1e-12)]
+
+
 def build_mesh(case: Case, spec: MeshSpec):
     """The curved quarter mesh of ``case`` (an :class:`ngsolve.Mesh` of order
     ``spec.order``), one material per body, boundaries named as the module says."""
@@ -231,11 +252,12 @@ def build_mesh(case: Case, spec: MeshSpec):
     tori = _tori(case)
     solids = [quarter_solid(name, s) for name, s in tori.items()]
     parameters = MeshingParameters(maxh=spec.h, grading=0.3)
-    for point in touch_points(case):
-        for s in tori.values():
-            for q in _surface_samples(s, point, spec.r_contact, spec.h_contact):
-                if q[0] >= -1e-12 and q[2] >= -1e-12:
-                    parameters.RestrictH(x=float(q[0]), y=float(q[1]), z=float(q[2]), h=spec.h_contact)
+    refined = [q for point in touch_points(case) for s in tori.values()
+               for q in _surface_samples(s, point, spec.r_contact, spec.h_contact)
+               if q[0] >= -1e-12 and q[2] >= -1e-12]
+    refined += [q for s in tori.values() for q in cap_edge_points(s, spec.h_contact)]
+    for q in refined:
+        parameters.RestrictH(x=float(q[0]), y=float(q[1]), z=float(q[2]), h=spec.h_contact)
     mesh = Mesh(OCCGeometry(Compound(solids)).GenerateMesh(parameters))
     mesh.Curve(spec.order)
     return mesh
