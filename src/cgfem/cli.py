@@ -237,7 +237,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="result folder (created when the run starts; must not be a file)")
     run.add_argument("--order", type=int, default=1,
                      help="element order: 1, the trilinear hexahedron (default, the paper's), or 2, "
-                          "the triquadratic one (27 nodes; not yet with contact)")
+                          "the triquadratic one (27 nodes)")
     run.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     run.set_defaults(func=_cmd_run)
     warmup = sub.add_parser("warmup", help="compile and cache the numba kernels (two small contact "

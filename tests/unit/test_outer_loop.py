@@ -141,3 +141,97 @@ def test_anderson_passes_a_broken_recovery_on_and_starts_afresh():
     # the history restarted: one pass again, nothing to mix (the pass before the break would
     # have been mixed with this one)
     assert anderson.next(x, fine) is fine
+
+
+class _Contact:
+    """A contact set whose passes report the held points ``script[k]`` against their rule
+    (empty: none), with no status switch."""
+
+    def __init__(self, script: list[str]):
+        self.script, self.passes = script, 0
+
+    def __bool__(self) -> bool:
+        return True
+
+    def active(self) -> list[np.ndarray]:
+        return [np.array([True, False])]
+
+    def freeze(self, u, frozen) -> None:
+        pass
+
+    def begin_pass(self, increment: bool) -> None:
+        self.passes += 1
+
+    def changes(self) -> str:
+        return ""
+
+    def contradicted(self) -> int:
+        return int(bool(self.script[self.passes - 1]))
+
+    def describe_contradicted(self) -> str:
+        return self.script[self.passes - 1]
+
+
+class _System:
+    """A linear system whose recovery is the same after every pass (the stress settles at
+    once) and whose contact is :class:`_Contact`."""
+
+    linear = True
+
+    def __init__(self, contact: _Contact):
+        from cgfem.solve.policy import SolverPolicy
+
+        self.contact, self.policy = contact, SolverPolicy()
+
+    def load_norm(self, t):
+        return 1.0
+
+    def force_scale(self, u):
+        return 1.0
+
+    def freeze(self, frozen) -> None:
+        pass
+
+    def recover(self, u):
+        return [np.ones((2, 3, 3))]
+
+    def turned_floating(self, u) -> str:
+        return ""
+
+    def continuous_residual(self, u, t):
+        return np.zeros(1), 0
+
+
+def _increment(monkeypatch, script):
+    import cgfem.solve.outer as outer
+    from cgfem.case.model import SolverOptions
+
+    monkeypatch.setattr(outer, "newton", lambda assemble, u0, solves, **kw: NewtonResult(
+        u0, True, [1.0, 1e-12], 1.0, "converged", tight=True))
+
+    class Solves:
+        frozen, factorizes = False, True
+    contact = _Contact(script)
+    out = outer.solve_increment(_System(contact), Solves(), np.zeros(3), [None], 1.0,
+                                SolverOptions(outer_passes=len(script)), lambda m: None)
+    return out, contact.passes
+
+
+def test_passes_that_repeat_the_same_held_points_against_their_rule_fail_the_increment(monkeypatch):
+    """Two settled passes in a row with the same contradicted points: the increment fails at
+    once (a cut-back follows), naming them, instead of repeating passes to the cap."""
+    from cgfem.solve.outer import UNSETTLED, IncrementFailure
+
+    out, passes = _increment(monkeypatch, ["p: points 7 (inactive)"] * 10)
+    assert isinstance(out, IncrementFailure) and out.reason == UNSETTLED and passes == 3
+    assert "p: points 7 (inactive)" in str(out)
+
+
+def test_held_points_that_change_or_clear_keep_the_outer_loop_going(monkeypatch):
+    """Other points each pass: no repetition, the loop goes on; once none contradicts, the
+    increment converges."""
+    from cgfem.solve.outer import Increment
+
+    script = ["p: points 7 (inactive)", "p: points 8 (active)", "p: points 7 (inactive)", ""]
+    out, passes = _increment(monkeypatch, script + [""] * 6)
+    assert isinstance(out, Increment) and out.outer_converged and passes == 4

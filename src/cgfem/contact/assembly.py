@@ -137,6 +137,19 @@ class ContactSet:
         """Held points (all pairs) whose own rule disagrees with the status they hold."""
         return sum(p.contradicted() for p in self.pairs)
 
+    def describe_contradicted(self, limit: int = 8) -> str:
+        """The held points that contradict their rule, per pair: ``pair: points i, j (held
+        active|inactive)``, at most ``limit`` indices per pair; empty if there are none."""
+        parts = []
+        for p in self.pairs:
+            idx = p.contradicted_points()
+            if idx.size:
+                held = np.where(p.state.held_active[idx], "active", "inactive")
+                listed = ", ".join(f"{i} ({h})" for i, h in zip(idx[:limit], held[:limit]))
+                more = f" and {idx.size - limit} more" if idx.size > limit else ""
+                parts.append(f"{p.name}: points {listed}{more}")
+        return "; ".join(parts)
+
     def freeze(self, u: np.ndarray, recovered: list[np.ndarray | None]) -> None:
         """Freeze every pair's ``p_N`` from the slaves' recovered stress at ``u``."""
         for k, p in enumerate(self.pairs):

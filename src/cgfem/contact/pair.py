@@ -287,10 +287,15 @@ class ContactPair:
     def contradicted(self) -> int:
         """Held points whose own rule disagrees with the status they hold (last
         linearization point)."""
+        return int(self.contradicted_points().size)
+
+    def contradicted_points(self) -> np.ndarray:
+        """Indices of the held points whose own rule disagrees with the status they hold
+        (last linearization point), ascending."""
         st = self.state
         if st.held is None or st.natural is None:
-            return 0
-        return int(np.sum(st.held & (st.natural != st.held_active)))
+            return np.zeros(0, np.int64)
+        return np.flatnonzero(st.held & (st.natural != st.held_active))
 
     # -- residual and tangent --------------------------------------------------------------
     def assemble(self, u_s: np.ndarray, u_m: np.ndarray, tangent: bool, update: bool = True):

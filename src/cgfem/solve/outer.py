@@ -22,6 +22,9 @@ from cgfem.contact.assembly import active_changes
 from cgfem.solve.newton import NewtonResult, newton
 
 Log = Callable[[str], None]
+#: the failure reason of an increment whose passes repeat a state with held points against
+#: their rule (:class:`IncrementFailure`)
+UNSETTLED = "contact_unsettled"
 
 
 @dataclass(frozen=True)
@@ -49,7 +52,10 @@ class IncrementFailure:
     its reference ``residual``, after ``iterations`` Newton iterations; ``contact``: what the
     contact set did at the last linearization point (empty without contact). ``rejected``:
     the outer loop ended but its state is no solution of the model (reason ``rejected``,
-    :meth:`~cgfem.solve.system.System.turned_floating`), and why."""
+    :meth:`~cgfem.solve.system.System.turned_floating`), and why. Reason :data:`UNSETTLED`:
+    two passes in a row converged (stress within ``outer_tol``, no switch) with the same
+    held points against their rule, which further passes would only repeat; ``contact``
+    names those points."""
 
     reason: str
     outer_pass: int
@@ -61,6 +67,9 @@ class IncrementFailure:
     def __str__(self) -> str:
         if self.rejected:
             return f"the state reached in outer pass {self.outer_pass} was rejected: {self.rejected}"
+        if self.reason == UNSETTLED:
+            return (f"contact did not settle: outer passes {self.outer_pass - 1} and {self.outer_pass} "
+                    f"converged to the same state with held points against their rule ({self.contact})")
         why = f"; {self.contact}" if self.contact else ""
         return (f"Newton stopped on {self.reason} in outer pass {self.outer_pass} at |r|/ref = "
                 f"{self.residual:.2e} after {self.iterations} iterations{why}")
@@ -197,6 +206,8 @@ def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray 
     contact = system.contact
     active = contact.active()
     settled = True
+    # the held points against their rule after a pass that otherwise settled
+    unsettled_before = ""
     if start is not None:
         u = start
     for outer in range(1, options.outer_passes + 1):
@@ -251,6 +262,15 @@ def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray 
             held = f", {contradicted} held against their rule" if contradicted else ""
             log(f"t={t:.4g} pass {outer}: recovered stress changed by {changes[-1]:.3e}, "
                 f"{int(sum(a.sum() for a in active))} active contact points ({switched} switched{held})")
+            # a pass that settled but for the same held points as the pass before: the next
+            # pass starts from the same state with the same frozen stress and repeats it
+            unsettled = contact.describe_contradicted() if (
+                outer > 1 and switched == 0 and contradicted and result.tight
+                and changes[-1] <= options.outer_tol) else ""
+            if unsettled and unsettled == unsettled_before:
+                log(f"t={t:.4g}: contact does not settle ({unsettled})")
+                return IncrementFailure(UNSETTLED, outer, 0.0, sum(len(h) - 1 for h in residuals), unsettled)
+            unsettled_before = unsettled
         else:
             settled = result.tight
             log(f"t={t:.4g} pass {outer}: recovered stress changed by {changes[-1]:.3e}")

@@ -6,9 +6,10 @@ weak Dirichlet conditions, later by contact), solves the nonlinear problem by Ne
 recovers ``P*`` from the new displacement and repeats until ``P*`` changes by at most
 ``outer_tol`` (relative, in the Frobenius norm over all nodes); the next pass freezes the
 recovery accelerated (:mod:`cgfem.solve.outer`). ``outer_passes`` is only a
-cap: a step that reaches it above ``outer_tol`` is kept but marked
-``outer_converged = False`` (and the run's status says so, see :class:`StaticResult`).
-When Newton fails, the increment is halved (at most ``max_cutbacks`` times per step,
+cap: a step that reaches it above ``outer_tol`` (or with contact not settled) is kept but
+marked ``outer_converged = False`` (and the run's status says so, see :class:`StaticResult`).
+When Newton fails, or two outer passes repeat a state with held contact points against their
+rule (:data:`~cgfem.solve.outer.UNSETTLED`), the increment is halved (at most ``max_cutbacks`` times per step,
 :class:`StepControl`) and the step is reached in several sub-steps; if it still fails, the
 run stops with status ``failed`` and keeps every converged step. The system, its items and
 its collaborators are in :mod:`cgfem.solve.system`; the tuning constants in
@@ -41,8 +42,8 @@ class StepRecord:
     frozen_stress : per body, the nodal recovered stress (n_nodes, 3, 3) the last Newton
         solve held frozen (None before any recovery); reactions are in equilibrium with it
     recovered : per body, the nodal stress (n_nodes, 3, 3) recovered from the converged ``u``
-    outer_converged : the last change of the recovered stress was <= ``outer_tol`` (False:
-        the loop stopped at the ``outer_passes`` cap)
+    outer_converged : the last change of the recovered stress was <= ``outer_tol`` and
+        contact had settled (False: the loop stopped at the ``outer_passes`` cap)
     """
 
     load_factor: float
@@ -154,9 +155,10 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
         control.accept(t_new)
         t = t_new
         if not outcome.outer_converged:
-            log(f"warning: t={t:.4g}: outer loop stopped at outer_passes = {options.outer_passes} "
-                f"with the recovered stress still changing by {outcome.outer_changes[-1]:.3e} "
-                f"> outer_tol = {options.outer_tol:.3e}")
+            change = outcome.outer_changes[-1]
+            why = (f"the recovered stress still changing by {change:.3e} > outer_tol = {options.outer_tol:.3e}"
+                   if change > options.outer_tol else "the contact set not settled")
+            log(f"warning: t={t:.4g}: outer loop stopped at outer_passes = {options.outer_passes} with {why}")
         record = StepRecord(t, outcome.newton_residuals, len(outcome.outer_changes),
                             outcome.outer_changes, outcome.outer_converged,
                             system.split(u.copy()), outcome.frozen_stress, recovered,
@@ -172,9 +174,9 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
     capped = [r.load_factor for r in records if not r.outer_converged]
     if capped:
         return StaticResult(OUTER_NOT_CONVERGED, records,
-                            f"outer loop stopped at outer_passes = {options.outer_passes} above "
-                            f"outer_tol = {options.outer_tol:.3g} at load factor(s) "
-                            f"{', '.join(f'{t:.6g}' for t in capped)}")
+                            f"outer loop stopped at outer_passes = {options.outer_passes} before the "
+                            f"recovered stress (outer_tol = {options.outer_tol:.3g}) and the contact set "
+                            f"settled at load factor(s) {', '.join(f'{t:.6g}' for t in capped)}")
     return StaticResult(CONVERGED, records)
 
 
