@@ -13,6 +13,7 @@ change from the lowest level to the next, and the planar error per level.
     python3 -m benchmarks.bench_offsets [--examples planar chain2_steel ...] [--levels 0 1]
         [--surfaces facets nurbs_fe nurbs_fit] [--count 10] [--seed 2026] [--jobs 2]
         [--reference results/reference/planar.npz] [--json out.json]
+    python3 -m benchmarks.bench_offsets --from-json L0.json L1.json   # summarize saved runs
 """
 
 from __future__ import annotations
@@ -103,7 +104,13 @@ def main() -> None:
     parser.add_argument("--reference", default=str(REPO / "results" / "reference" / "planar.npz"),
                         help="the planar reference (python3 -m cgfem.reference.planar --out FILE)")
     parser.add_argument("--json", help="write every run's figures to this file")
+    parser.add_argument("--from-json", nargs="+", metavar="FILE",
+                        help="run nothing: summarize the runs saved by earlier --json files together")
     args = parser.parse_args()
+    if args.from_json:
+        rows = [row for name in args.from_json for row in json.loads(Path(name).read_text())]
+        summarize(rows, sorted({r["level"] for r in rows}))
+        return
     print(f"seed {args.seed}, {args.count} offsets per body; cores {os.cpu_count()}, load "
           f"{os.getloadavg()[0]:.2f}", flush=True)
     jobs = []
