@@ -120,7 +120,8 @@ def fig_validation(inputs, von_mises: dict | None = None) -> Figure:
     """One row per chain example with a reference (``inputs``: reference JSONs and run
     summaries): (a) signed relative error (%) of the pulled reaction (the reference's
     ``supports.pulled``) at every load step, every run, the reference's uncertainty shaded; (b) |relative error| of the final pulled
-    reaction against the run's DOFs (log-log), a line per definition, the reference's
+    reaction against the run's DOFs (log-log), a line per definition and element order (order 2
+    dashed), the reference's
     uncertainty dotted; (c) the same for the peak von Mises stress of the body
     ``von_mises[case]`` (chain3: ``link_c``), dotted the change of the reference's peak
     between its two finest meshes, or, without one, the final pulled reaction
@@ -171,16 +172,25 @@ def _panel_steps(ax, case: str, ref: Reference, runs: list[Run], key: str) -> No
         ax.legend(ncol=2, fontsize=5.5)
 
 
+def _series(runs: list[Run]) -> list[tuple[str, int, list[Run]]]:
+    """The runs as one series per (definition, element order), each by level, with its
+    label (``surface``, and `` o2`` for order 2)."""
+    out = []
+    for surface, order in sorted({(r.surface, r.order) for r in runs}):
+        group = sorted((r for r in runs if r.surface == surface and r.order == order), key=lambda r: r.level)
+        out.append((surface + (f" o{order}" if order != 1 else ""), order, group))
+    return out
+
+
 def _panel_dofs(ax, case: str, ref: Reference, runs: list[Run], error, what: str,
                 uncertainty: float) -> None:
-    for surface in sorted({r.surface for r in runs}):
-        group = sorted((r for r in runs if r.surface == surface), key=lambda r: r.level)
+    for label, order, group in _series(runs):
         dofs = np.array([r.dofs for r in group], float)
         err = np.abs(np.array([error(r) for r in group], float))
         ok = np.isfinite(err) & (err > 0)
         if ok.any():
-            ax.loglog(dofs[ok], err[ok], marker="o", label=surface,
-                      **{**pen(surface), "linewidth": 1.0})
+            ax.loglog(dofs[ok], err[ok], marker="o" if order == 1 else "s", label=label,
+                      **{**pen(group[0].surface), "linewidth": 1.0, "linestyle": "-" if order == 1 else "--"})
     if uncertainty > 0:
         ax.axhline(uncertainty, color="k", linestyle=":", linewidth=0.8,
                    label=f"reference uncertainty ({uncertainty:.2%})")
@@ -191,12 +201,12 @@ def _panel_dofs(ax, case: str, ref: Reference, runs: list[Run], error, what: str
 
 def _panel_absolute(ax, case: str, ref: Reference, runs: list[Run], key: str) -> None:
     target = ref.reactions[key][-1, Y] if key in ref.reactions else np.nan
-    for surface in sorted({r.surface for r in runs}):
-        group = [r for r in sorted(runs, key=lambda r: r.level) if r.surface == surface and r.n_steps
-                 and np.isclose(r.load_factors()[-1], ref.load_factors[-1])]
+    for label, order, series in _series(runs):
+        group = [r for r in series if r.n_steps and np.isclose(r.load_factors()[-1], ref.load_factors[-1])]
         if group:
             ax.semilogx([r.dofs for r in group], [r.reactions(key)[-1, Y] for r in group],
-                        marker="o", color=colour(surface), label=surface)
+                        marker="o" if order == 1 else "s", linestyle="-" if order == 1 else "--",
+                        color=colour(group[0].surface), label=label)
     ax.axhline(target, color="k", linewidth=0.8, label=f"reference ({ref.dofs} DOFs, NGSolve)")
     ax.axhspan(target * (1 - ref.uncertainty), target * (1 + ref.uncertainty), color="0.85", zorder=0)
     ax.set(title=f"{case}: final pulled reaction", xlabel="DOFs", ylabel="F_y (N)")
