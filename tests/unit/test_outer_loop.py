@@ -168,6 +168,9 @@ class _Contact:
     def contradicted(self) -> int:
         return int(bool(self.script[self.passes - 1]))
 
+    def contradicted_state(self) -> str:
+        return self.script[self.passes - 1]
+
     def describe_contradicted(self) -> str:
         return self.script[self.passes - 1]
 

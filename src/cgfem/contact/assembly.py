@@ -137,6 +137,12 @@ class ContactSet:
         """Held points (all pairs) whose own rule disagrees with the status they hold."""
         return sum(p.contradicted() for p in self.pairs)
 
+    def contradicted_state(self) -> tuple:
+        """Which held points contradict their rule and the status each holds, per pair
+        (hashable, equal for equal states)."""
+        return tuple((tuple(idx), tuple(p.state.held_active[idx]))
+                     for p in self.pairs for idx in [p.contradicted_points()])
+
     def describe_contradicted(self, limit: int = 8) -> str:
         """The held points that contradict their rule, per pair: ``pair: points i, j (held
         active|inactive)``, at most ``limit`` indices per pair; empty if there are none."""

@@ -207,7 +207,7 @@ def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray 
     active = contact.active()
     settled = True
     # the held points against their rule after a pass that otherwise settled
-    unsettled_before = ""
+    unsettled_before = None
     if start is not None:
         u = start
     for outer in range(1, options.outer_passes + 1):
@@ -264,12 +264,13 @@ def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray 
                 f"{int(sum(a.sum() for a in active))} active contact points ({switched} switched{held})")
             # a pass that settled but for the same held points as the pass before: the next
             # pass starts from the same state with the same frozen stress and repeats it
-            unsettled = contact.describe_contradicted() if (
+            unsettled = contact.contradicted_state() if (
                 outer > 1 and switched == 0 and contradicted and result.tight
-                and changes[-1] <= options.outer_tol) else ""
-            if unsettled and unsettled == unsettled_before:
-                log(f"t={t:.4g}: contact does not settle ({unsettled})")
-                return IncrementFailure(UNSETTLED, outer, 0.0, sum(len(h) - 1 for h in residuals), unsettled)
+                and changes[-1] <= options.outer_tol) else None
+            if unsettled is not None and unsettled == unsettled_before:
+                which = contact.describe_contradicted()
+                log(f"t={t:.4g}: contact does not settle ({which})")
+                return IncrementFailure(UNSETTLED, outer, 0.0, sum(len(h) - 1 for h in residuals), which)
             unsettled_before = unsettled
         else:
             settled = result.tight

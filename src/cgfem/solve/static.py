@@ -9,9 +9,10 @@ recovery accelerated (:mod:`cgfem.solve.outer`). ``outer_passes`` is only a
 cap: a step that reaches it above ``outer_tol`` (or with contact not settled) is kept but
 marked ``outer_converged = False`` (and the run's status says so, see :class:`StaticResult`).
 When Newton fails, or two outer passes repeat a state with held contact points against their
-rule (:data:`~cgfem.solve.outer.UNSETTLED`), the increment is halved (at most ``max_cutbacks`` times per step,
-:class:`StepControl`) and the step is reached in several sub-steps; if it still fails, the
-run stops with status ``failed`` and keeps every converged step. The system, its items and
+rule (:data:`~cgfem.solve.outer.UNSETTLED`), the increment is halved (at most
+``max_cutbacks`` times per step, :class:`StepControl`) and the step is reached in several
+sub-steps; if it still fails, the run stops with status ``failed`` and keeps every converged
+step. The system, its items and
 its collaborators are in :mod:`cgfem.solve.system`; the tuning constants in
 :class:`~cgfem.solve.policy.SolverPolicy`, which the system carries.
 """
