@@ -11,7 +11,7 @@ body-fitted reference. Per example and definition: the fraction converged, the s
 change from the lowest level to the next, and the planar error per level.
 
     python3 -m benchmarks.bench_offsets [--examples planar chain2_steel ...] [--levels 0 1]
-        [--surfaces facets nurbs_fe nurbs_fit] [--count 10] [--seed 2026] [--jobs 2]
+        [--surfaces facets nurbs_fe nurbs_fit] [--count 10] [--sets K ...] [--seed 2026] [--jobs 2]
         [--reference results/reference/planar.npz] [--json out.json]
     python3 -m benchmarks.bench_offsets --from-json L0.json L1.json   # summarize saved runs
 """
@@ -99,6 +99,8 @@ def main() -> None:
     parser.add_argument("--levels", type=int, nargs="+", default=[0, 1])
     parser.add_argument("--surfaces", nargs="+", default=["facets", "nurbs_fe", "nurbs_fit"])
     parser.add_argument("--count", type=int, default=10)
+    parser.add_argument("--sets", type=int, nargs="+", metavar="K",
+                        help="run only these offset sets (0 to count - 1; the same offsets as in a full sweep)")
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--jobs", type=int, default=2, help="runs at once (one thread each)")
     parser.add_argument("--reference", default=str(REPO / "results" / "reference" / "planar.npz"),
@@ -116,6 +118,8 @@ def main() -> None:
     jobs = []
     for example in args.examples:
         for k, (case, offsets) in enumerate(offset_cases(example, args.count, args.seed)):
+            if args.sets is not None and k not in args.sets:
+                continue
             print(f"{example} offset set {k}: " + ", ".join(f"{b} {o}" for b, o in offsets.items()), flush=True)
             for level in args.levels:
                 for surface in args.surfaces:
