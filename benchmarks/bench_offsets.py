@@ -109,6 +109,8 @@ def main() -> None:
     parser.add_argument("--from-json", nargs="+", metavar="FILE",
                         help="run nothing: summarize the runs saved by earlier --json files together")
     args = parser.parse_args()
+    if args.sets is not None and not all(0 <= k < args.count for k in args.sets):
+        parser.error(f"--sets: offset sets run from 0 to {args.count - 1} (--count {args.count})")
     if args.from_json:
         rows = [row for name in args.from_json for row in json.loads(Path(name).read_text())]
         summarize(rows, sorted({r["level"] for r in rows}))

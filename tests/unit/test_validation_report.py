@@ -4,6 +4,7 @@ reference JSON and synthetic run summaries: every assertion is on the data drawn
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +13,7 @@ import pytest
 from cgfem.report import figure
 from cgfem.report.claims import claims_markdown, reference_distance
 from cgfem.report.runs import load_runs
-from cgfem.report.validation import Reference, final_error, run_errors, von_mises_error
+from cgfem.report.validation import Reference, _order_style, _series, final_error, run_errors, von_mises_error
 
 PULLED, CLAMPED = "link_b/cap_a+cap_b", "link_a/cap_a+cap_b"
 REF_F = np.array([100.0, 250.0, 400.0, 600.0])          # reference pulled reaction per step (N)
@@ -94,3 +95,15 @@ def test_claims_name_the_distance_of_their_runs(tmp_path):
     table = claims_markdown([Claim(4, "x", True, "n", text), Claim(1, "y", False, "m")])
     rows = [line for line in table.splitlines() if line.startswith("| ") and line[2].isdigit()]
     assert [r.split("|")[5].strip() for r in rows] == [text, "no reference"]
+
+
+def test_each_definition_and_order_is_its_own_series():
+    """Runs of one definition at orders 1 and 2 are two series, each by level, labelled
+    ``nurbs_fe`` and ``nurbs_fe o2``, drawn solid and dashed: joining them would draw a line
+    from order 1 at level 2 back to order 2 at level 0."""
+    runs = [SimpleNamespace(surface=s, order=o, level=l)
+            for s, o, l in [("nurbs_fe", 1, 2), ("nurbs_fe", 2, 0), ("nurbs_fe", 1, 0), ("facets", 1, 1)]]
+    series = _series(runs)
+    assert [(label, order, [r.level for r in group]) for label, order, group in series] == [
+        ("facets", 1, [1]), ("nurbs_fe", 1, [0, 2]), ("nurbs_fe o2", 2, [0])]
+    assert _order_style(1)["linestyle"] == "-" and _order_style(2)["linestyle"] == "--"

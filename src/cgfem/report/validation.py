@@ -172,6 +172,12 @@ def _panel_steps(ax, case: str, ref: Reference, runs: list[Run], key: str) -> No
         ax.legend(ncol=2, fontsize=5.5)
 
 
+def _order_style(order: int) -> dict:
+    """Marker and line of an element order's series: order 1 solid with circles, order 2
+    dashed with squares."""
+    return {"marker": "o", "linestyle": "-"} if order == 1 else {"marker": "s", "linestyle": "--"}
+
+
 def _series(runs: list[Run]) -> list[tuple[str, int, list[Run]]]:
     """The runs as one series per (definition, element order), each by level, with its
     label (``surface``, and `` o2`` for order 2)."""
@@ -189,8 +195,8 @@ def _panel_dofs(ax, case: str, ref: Reference, runs: list[Run], error, what: str
         err = np.abs(np.array([error(r) for r in group], float))
         ok = np.isfinite(err) & (err > 0)
         if ok.any():
-            ax.loglog(dofs[ok], err[ok], marker="o" if order == 1 else "s", label=label,
-                      **{**pen(group[0].surface), "linewidth": 1.0, "linestyle": "-" if order == 1 else "--"})
+            ax.loglog(dofs[ok], err[ok], label=label,
+                      **{**pen(group[0].surface), "linewidth": 1.0, **_order_style(order)})
     if uncertainty > 0:
         ax.axhline(uncertainty, color="k", linestyle=":", linewidth=0.8,
                    label=f"reference uncertainty ({uncertainty:.2%})")
@@ -205,8 +211,7 @@ def _panel_absolute(ax, case: str, ref: Reference, runs: list[Run], key: str) ->
         group = [r for r in series if r.n_steps and np.isclose(r.load_factors()[-1], ref.load_factors[-1])]
         if group:
             ax.semilogx([r.dofs for r in group], [r.reactions(key)[-1, Y] for r in group],
-                        marker="o" if order == 1 else "s", linestyle="-" if order == 1 else "--",
-                        color=colour(group[0].surface), label=label)
+                        **_order_style(order), color=colour(group[0].surface), label=label)
     ax.axhline(target, color="k", linewidth=0.8, label=f"reference ({ref.dofs} DOFs, NGSolve)")
     ax.axhspan(target * (1 - ref.uncertainty), target * (1 + ref.uncertainty), color="0.85", zorder=0)
     ax.set(title=f"{case}: final pulled reaction", xlabel="DOFs", ylabel="F_y (N)")
