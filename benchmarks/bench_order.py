@@ -14,6 +14,9 @@ Default case: the clamped half torus of ``config/cases/bent_half_torus.yaml`` (r
 
     python3 -m benchmarks.bench_order --case config/cases/chain2_steel.yaml \\
         --levels 0 1 2 3 --orders 1 2 [--surface nurbs_fe] [--json rows.json]
+
+``--runs 2:0 2:1 1:0 1:1 1:2 1:3`` runs chosen ``order:level`` pairs instead of every order at
+every level.
 """
 
 from __future__ import annotations
@@ -123,9 +126,18 @@ def main() -> None:
     parser.add_argument("--case", type=Path, default=CASE)
     parser.add_argument("--levels", type=int, nargs="+", default=[0, 1, 2, 3])
     parser.add_argument("--orders", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--runs", nargs="+", metavar="ORDER:LEVEL",
+                        help="run these order:level pairs (instead of --orders x --levels)")
     parser.add_argument("--surface", default="nurbs_fe")
     parser.add_argument("--json", type=Path, help="write the rows here after every run")
     args = parser.parse_args()
+    try:
+        runs = ([tuple(int(v) for v in pair.split(":", 1)) for pair in args.runs] if args.runs
+                else [(order, level) for order in args.orders for level in args.levels])
+    except ValueError:
+        print(f"bench_order: --runs: expected ORDER:LEVEL pairs such as 2:1, got {' '.join(args.runs)}",
+              file=sys.stderr)
+        raise SystemExit(2)
     from cgfem.case.load import load_case
     from cgfem.errors import InputError
 
@@ -140,19 +152,18 @@ def main() -> None:
     print(f"{name} ({args.case}), surface {args.surface}, y reaction of {support}; cores {os.cpu_count()}; "
           f"threads {threads}; load average {os.getloadavg()[0]:.2f}", flush=True)
     rows = []
-    for order in args.orders:
-        for level in args.levels:
-            r = run_child(args.case.resolve(), level, order, args.surface, support)
-            rows.append(r)
-            print(f"order {order} level {level}: {r.get('status')} "
-                  + (f"{r['dofs']} unknowns, {r['newton']} Newton, reaction {r['reaction_y']:.8g} N, "
-                     f"{r['wall_s']:.1f} s, {r['peak_mib']:.0f} MiB" if r.get("status") == "converged" else ""),
-                  flush=True)
-            if args.json:
-                tmp = args.json.with_suffix(".tmp")
-                tmp.write_text(json.dumps({"case": name, "surface": args.surface, "support": support,
-                                           "reference": reference, "rows": rows}, indent=1))
-                tmp.replace(args.json)
+    for order, level in runs:
+        r = run_child(args.case.resolve(), level, order, args.surface, support)
+        rows.append(r)
+        print(f"order {order} level {level}: {r.get('status')} "
+              + (f"{r['dofs']} unknowns, {r['newton']} Newton, reaction {r['reaction_y']:.8g} N, "
+                 f"{r['wall_s']:.1f} s, {r['peak_mib']:.0f} MiB" if r.get("status") == "converged" else ""),
+              flush=True)
+        if args.json:
+            tmp = args.json.with_suffix(".tmp")
+            tmp.write_text(json.dumps({"case": name, "surface": args.surface, "support": support,
+                                       "reference": reference, "rows": rows}, indent=1))
+            tmp.replace(args.json)
     report(rows, reference)
 
 
