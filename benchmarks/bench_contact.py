@@ -370,6 +370,7 @@ def part_run(level: int) -> dict:
     import yaml
 
     from cgfem.case.load import load_case
+    from cgfem.report.runs import Run
     from cgfem.run import run_case
 
     timers = Timers()
@@ -397,7 +398,7 @@ def part_run(level: int) -> dict:
     step = summary["steps"][-1] if summary["steps"] else {}
     return {"level": level, "status": status.status, "total_s": total, "seconds": timers.seconds,
             "calls": timers.calls, "first": timers.first, "dofs": sum(b["dofs"] for b in summary["bodies"].values()),
-            "newton": sum(len(r) - 1 for s in summary["steps"] for r in s["pass_residuals"]),
+            "newton": Run(status.summary.parent, summary).newton_iterations,
             "passes": sum(s["outer_passes"] for s in summary["steps"]),
             "active": step.get("contact", {}).get("active_points", 0),
             "pull": data["boundary"][-1]["components"]["y"], "peak_mib": peak_mib(), "load": load()}

@@ -52,6 +52,7 @@ def one_run(level: int, surface: str, folder: Path, first_step: bool = False, ve
 
     import cgfem.solve.solves as static
     from cgfem.case.load import load_case
+    from cgfem.report.runs import Run
     from cgfem.run import run_case
 
     matrices: list[dict] = []
@@ -72,7 +73,7 @@ def one_run(level: int, surface: str, folder: Path, first_step: bool = False, ve
             print(f"[L{level} {surface}] {message}", file=sys.stderr, flush=True)
     status = run_case(case, level, surface, folder / "out", log=log)
     summary = json.loads(status.summary.read_text())
-    iterations = sum(len(r) - 1 for s in summary["steps"] for r in s["pass_residuals"])
+    iterations = Run(status.summary.parent, summary).newton_iterations
     solve = summary["timings"]["solve_s"]
     widest = max(matrices, key=lambda m: m["nnz"] / m["n"])
     return {"level": level, "surface": surface, "status": summary["status"], "unknowns": widest["n"],

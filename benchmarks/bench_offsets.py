@@ -30,6 +30,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from cgfem.report.runs import Run
+
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = {"planar": "planar.yaml", "chain2_steel": "chain2_steel.yaml",
             "chain2_rubber": "chain2_rubber.yaml", "chain3": "chain3.yaml"}
@@ -66,7 +68,7 @@ def run_one(case: dict, level: int, surface: str, folder: Path, threads: int) ->
     steps = summary["steps"]
     return {"status": summary["status"], "message": summary.get("message", ""), "steps": len(steps),
             "cutbacks": max(0, len(steps) - int(case.get("steps", 1))) if summary["status"] == "converged"
-            else None, "newton": sum(len(r) - 1 for s in steps for r in s["pass_residuals"]),
+            else None, "newton": Run(folder / "out", summary).newton_iterations,
             "final": final_value(case, steps), "folder": str(folder / "out")}
 
 

@@ -42,23 +42,22 @@ ACCURACY = 0.01
 def one_run(case: Path, level: int, order: int, surface: str, support: str, folder: Path) -> dict:
     """Solve one level and order in this process (called in a child); its figures."""
     from cgfem.case.load import load_case
+    from cgfem.report.runs import Run
     from cgfem.run import run_case
 
     start = time.perf_counter()
     status = run_case(load_case(case), level, surface, folder / "out", order=order)
     wall = time.perf_counter() - start
-    summary = json.loads(status.summary.read_text())
-    steps = summary["steps"]
-    row = {"level": level, "order": order, "status": status.status,
-           "dofs": sum(b["dofs"] for b in summary["bodies"].values()),
-           "cut": sum(b["elements"]["cut"] for b in summary["bodies"].values()),
-           "newton": sum(len(r) - 1 for s in steps for r in s["pass_residuals"]),
-           "steps": len(steps), "build_s": summary["timings"]["build_s"],
-           "solve_s": summary["timings"]["solve_s"], "wall_s": wall,
+    run = Run.load(status.summary)
+    timings = run.timings()
+    row = {"level": level, "order": order, "status": status.status, "dofs": run.dofs,
+           "cut": sum(run.body(b)["elements"]["cut"] for b in run.body_names),
+           "newton": run.newton_iterations, "steps": run.n_steps, "build_s": timings["build_s"],
+           "solve_s": timings["solve_s"], "wall_s": wall,
            "peak_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
-    if steps:
-        row["load_factor"] = steps[-1]["load_factor"]
-        row["reaction_y"] = steps[-1]["reactions"][support][1]
+    if run.n_steps:
+        row["load_factor"] = float(run.load_factors()[-1])
+        row["reaction_y"] = float(run.reactions(support)[-1, 1])
     return row
 
 
@@ -117,6 +116,15 @@ def report(rows: list[dict], reference: float | None) -> dict:
     return cheapest
 
 
+def _order_level(pair: str) -> tuple[int, int]:
+    """``"2:1"`` -> (2, 1); anything else stops with a one-line error (exit 2)."""
+    order, colon, level = pair.partition(":")
+    if colon and order.isdigit() and level.isdigit():
+        return int(order), int(level)
+    print(f"bench_order: --runs: expected ORDER:LEVEL pairs such as 2:1, got {pair!r}", file=sys.stderr)
+    raise SystemExit(2)
+
+
 def main() -> None:
     if len(sys.argv) > 1 and sys.argv[1] == "--child":
         case, level, order, surface, support, folder = sys.argv[2:8]
@@ -131,13 +139,8 @@ def main() -> None:
     parser.add_argument("--surface", default="nurbs_fe")
     parser.add_argument("--json", type=Path, help="write the rows here after every run")
     args = parser.parse_args()
-    try:
-        runs = ([tuple(int(v) for v in pair.split(":", 1)) for pair in args.runs] if args.runs
-                else [(order, level) for order in args.orders for level in args.levels])
-    except ValueError:
-        print(f"bench_order: --runs: expected ORDER:LEVEL pairs such as 2:1, got {' '.join(args.runs)}",
-              file=sys.stderr)
-        raise SystemExit(2)
+    runs = ([_order_level(pair) for pair in args.runs] if args.runs
+            else [(order, level) for order in args.orders for level in args.levels])
     from cgfem.case.load import load_case
     from cgfem.errors import InputError
 

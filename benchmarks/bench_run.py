@@ -39,6 +39,7 @@ CASE = textwrap.dedent("""\
 def one_level(level: int, surface: str, folder: Path) -> dict:
     """Run one level in this process (called in a child) and return its figures."""
     from cgfem.case.load import load_case
+    from cgfem.report.runs import Run
     from cgfem.run import run_case
 
     case_file = folder / "case.yaml"
@@ -51,7 +52,7 @@ def one_level(level: int, surface: str, folder: Path) -> dict:
     steps = summary["steps"]
     return {"level": level, "status": status.status, "dofs": body["dofs"], "cut": body["elements"]["cut"],
             "build_s": summary["timings"]["build_s"], "solve_s": summary["timings"]["solve_s"], "wall_s": wall,
-            "newton": sum(len(r) - 1 for s in steps for r in s["pass_residuals"]),
+            "newton": Run(status.summary.parent, summary).newton_iterations,
             "passes": sum(s["outer_passes"] for s in steps),
             "reaction_y": steps[-1]["reactions"]["link/cap_b"][1] if steps else float("nan"),
             "peak_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}

@@ -496,3 +496,11 @@ def test_claim_4_over_levels_decides_where_it_can(tmp_path):
     assert not claim_lower_von_mises(load_runs(higher), [1, 2], "link_c").reproduced
     # nothing decided: not reproduced
     assert not claim_lower_von_mises(load_runs(chain3[2:]), [1, 2], "link_c").reproduced
+
+
+def test_newton_iterations_count_every_pass_of_every_step_less_its_first_residual():
+    """Residual lists hold the initial residual, then one entry per iteration: 3 residuals
+    are 2 iterations, a pass that starts converged (1 residual) none."""
+    steps = [{"pass_residuals": [[1.0, 1e-3, 1e-9], [1e-10]]}, {"pass_residuals": [[1.0, 1e-12]]}]
+    assert Run(Path("."), {"steps": steps}).newton_iterations == 3
+

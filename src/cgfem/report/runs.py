@@ -134,6 +134,12 @@ class Run:
         """DOFs of all bodies."""
         return int(sum(b["dofs"] for b in self.summary["bodies"].values()))
 
+    @property
+    def newton_iterations(self) -> int:
+        """Newton iterations of every pass of every converged step (each solve's residuals
+        less its first)."""
+        return sum(len(r) - 1 for s in self.summary["steps"] for r in s["pass_residuals"])
+
     def body(self, name: str) -> dict:
         """``summary["bodies"][name]``: nodes, dofs, volume, area, brep_volume, brep_area, h."""
         return dict(self.summary["bodies"][name])
