@@ -180,6 +180,7 @@ def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None
             "nodes": model.space.n_nodes, "dofs": model.n_dofs,
             "elements": {k: v for k, v in emb.counts().items() if k in ("inside", "cut")},
             "h": model.space.h, "ghost_penalty": model.gamma,
+            "kappa_dirichlet": model.kappa_dirichlet,
             "volume": float(emb.volume.w.sum()), "area": float(emb.surface.w.sum()),
             "brep_volume": brep[body.name][0], "brep_area": brep[body.name][1]}
         log(f"body {body.name}: {model.space.n_nodes} nodes, {model.n_dofs} dofs, "

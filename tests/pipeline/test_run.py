@@ -292,6 +292,22 @@ def test_outer_loop_runs_to_its_tolerance_with_default_settings(tmp_path):
     assert np.abs(reaction[1:]).max() <= 1e-7 * exact
 
 
+@pytest.mark.parametrize("order, solver, kappa", [(1, "", 10.0), (2, "", 640.0),
+                                                  (2, "solver: {kappa_dirichlet: 25}\n", 25.0)])
+def test_weak_dirichlet_factor_is_the_elements_unless_set_and_the_bar_stays_exact(
+        tmp_path, order, solver, kappa):
+    """``kappa_dirichlet`` defaults to the element's (10 trilinear, 640 triquadratic), a case
+    value overrides it, the summary records the one used; the method is consistent, so the
+    bar's linear field and reaction are exact whatever the factor."""
+    out = tmp_path / "out"
+    assert main(["run", _write(tmp_path, BAR + solver), "--level", "0", "--surface", "nurbs_fe",
+                 "--out", str(out), "--order", str(order), "--quiet"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["bodies"]["b"]["kappa_dirichlet"] == kappa
+    reaction = np.array(summary["steps"][-1]["reactions"]["b/xmax"])
+    assert abs(reaction[0] - BAR_E * BAR_D) <= 1e-7 * BAR_E * BAR_D
+
+
 def test_outer_loop_cap_is_reported_not_hidden(tmp_path, capsys):
     case = BAR + "solver: {outer_passes: 1, outer_tol: 1.0e-12}\n"
     out = tmp_path / "out"

@@ -109,14 +109,16 @@ def test_schema_is_valid_and_its_defaults_match_the_dataclasses() -> None:
     jsonschema.Draft202012Validator.check_schema(schema)
     solver = schema["$defs"]["solver"]["properties"]
     defaults = SolverOptions()
-    names = ("newton_tol", "max_newton", "outer_passes", "linear", "outer_tol", "max_cutbacks",
-             "kappa_dirichlet")
-    assert {k: v["default"] for k, v in solver.items() if k != "ghost_penalty"} == \
+    names = ("newton_tol", "max_newton", "outer_passes", "linear", "outer_tol", "max_cutbacks")
+    per_element = ("ghost_penalty", "kappa_dirichlet")
+    assert {k: v["default"] for k, v in solver.items() if k not in per_element} == \
         {n: getattr(defaults, n) for n in names}
-    # the ghost penalty's default is the element's, named in the description
-    assert "default" not in solver["ghost_penalty"] and defaults.ghost_penalty is None
-    assert f"{HEX8.ghost_penalty} at order 1" in solver["ghost_penalty"]["description"]
-    assert f"{HEX27.ghost_penalty} at order 2" in solver["ghost_penalty"]["description"]
+    # the ghost penalty's and the weak-Dirichlet factor's defaults are the element's, named in
+    # the descriptions
+    for name in per_element:
+        assert "default" not in solver[name] and getattr(defaults, name) is None
+        assert f"{getattr(HEX8, name):g} at order 1" in solver[name]["description"]
+        assert f"{getattr(HEX27, name):g} at order 2" in solver[name]["description"]
     assert schema["$defs"]["contactPair"]["properties"]["kappa"]["default"] == ContactPair.kappa
     assert tuple(schema["$defs"]["grid"]["properties"]["offset"]["default"]) == GridSpec.offset
     assert schema["properties"]["steps"]["default"] == 1

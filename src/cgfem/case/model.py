@@ -246,8 +246,8 @@ class SolverOptions:
     outer-loop tolerance on the recovered stress and its cap ``outer_passes`` (a step whose
     loop reaches the cap above ``outer_tol`` is reported ``outer_converged: false``), the
     number of step cut-backs, and the weak-Dirichlet (``kappa_dirichlet``) and
-    ghost-penalty parameters (``ghost_penalty`` None: the element's own,
-    :attr:`cgfem.fem.element.Hexahedron.ghost_penalty`)."""
+    ghost-penalty (``ghost_penalty``) parameters (None: the element's own,
+    :attr:`cgfem.fem.element.Hexahedron.kappa_dirichlet` and ``.ghost_penalty``)."""
 
     newton_tol: float = 1e-9
     max_newton: int = 30
@@ -255,11 +255,13 @@ class SolverOptions:
     linear: Literal["auto", "superlu", "pyamg", "pardiso"] = "auto"
     outer_tol: float = 1e-6
     max_cutbacks: int = 5
-    kappa_dirichlet: float = 10.0
+    kappa_dirichlet: float | None = None
     ghost_penalty: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("newton_tol", "outer_tol", "kappa_dirichlet"):
+            if name == "kappa_dirichlet" and self.kappa_dirichlet is None:
+                continue
             value = _finite(name, getattr(self, name))
             if not value > 0.0:
                 raise InputError(name, f"must be > 0, got {getattr(self, name)!r}")

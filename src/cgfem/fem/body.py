@@ -36,6 +36,7 @@ class BodyModel:
     elasticity: Elasticity
     ghost: sp.csr_matrix             # (n_dofs, n_dofs) the ghost penalty of parameter gamma
     gamma: float                     # the ghost-penalty parameter it was built with
+    kappa_dirichlet: float           # the weak-Dirichlet factor, beta = kappa_dirichlet E / h
     dirichlet: list[WeakDirichlet]
     load: np.ndarray                 # (n_dofs,) dead loads at load factor 1
     recovery: spr.Recovery
@@ -49,7 +50,7 @@ class BodyModel:
         """The model of ``body`` on ``embedding`` with ``element`` and the case's ``boundary``
         entries that name it (each a :class:`DisplacementBC` or :class:`TractionBC`);
         ``options`` gives the weak-Dirichlet and ghost-penalty parameters (the element's own
-        ``gamma`` unless the options set one). In small strain
+        ``kappa_dirichlet`` and ``gamma`` unless the options set them). In small strain
         every material is its linearization (linear elastic with the same E and nu). The
         embedding's rules must integrate the element's degree (``embedding.degree >=
         element.degree``), else ``ValueError``."""
@@ -65,7 +66,8 @@ class BodyModel:
         pattern = build_pattern(space, extra)
         volume = space.volume_points(embedding)
         elasticity = Elasticity(space, pattern, volume, model, mu, lam)
-        beta = options.kappa_dirichlet * body.material.E / space.h
+        kappa = element.kappa_dirichlet if options.kappa_dirichlet is None else options.kappa_dirichlet
+        beta = kappa * body.material.E / space.h
         load = np.zeros(space.n_dofs)
         if body.body_force is not None:
             load += body_force_load(space, volume, body.body_force)
@@ -78,7 +80,7 @@ class BodyModel:
                 dirichlet.append(WeakDirichlet.build(label, space, pattern, points, bc.components, beta))
             elif isinstance(bc, TractionBC):
                 load += traction_load(space, points, bc.value)
-        return cls(body.name, space, embedding, pattern, elasticity, G, gamma, dirichlet, load,
+        return cls(body.name, space, embedding, pattern, elasticity, G, gamma, kappa, dirichlet, load,
                    spr.build_recovery(space))
 
     @property

@@ -36,12 +36,16 @@ class Hexahedron:
     cell_type : the meshio cell type of ``step_NNN.vtu`` (``hexahedron``, ``hexahedron27``)
     ghost_penalty : the default ghost-penalty parameter ``gamma`` of this element (the case's
         ``solver.ghost_penalty`` overrides it; :mod:`cgfem.fem.ghost`)
+    kappa_dirichlet : the default weak-Dirichlet factor ``kappa_D`` of this element,
+        ``beta = kappa_D E / h`` (the case's ``solver.kappa_dirichlet`` overrides it;
+        :class:`cgfem.fem.boundary.WeakDirichlet`)
     """
 
     order: int
     node_ijk: np.ndarray = field(repr=False)
     cell_type: str
     ghost_penalty: float
+    kappa_dirichlet: float
 
     @property
     def n_nodes(self) -> int:
@@ -121,9 +125,11 @@ def _bernstein_map(order: int, node_ijk: np.ndarray) -> np.ndarray:
 
 
 #: the trilinear hexahedron (H8), the paper's element
-HEX8 = Hexahedron(1, kern.HEX8_IJK, "hexahedron", ghost_penalty=0.05)
+HEX8 = Hexahedron(1, kern.HEX8_IJK, "hexahedron", ghost_penalty=0.05, kappa_dirichlet=10.0)
 #: the triquadratic Lagrange hexahedron (27 nodes, VTK's node order)
-HEX27 = Hexahedron(2, kern.HEX27_IJK, "hexahedron27", ghost_penalty=0.01)
+#: (kappa_D 10 lets the outer loop of nearly incompressible rubber diverge at order 2:
+#: docs/methods/elasticity.md, "Weak Dirichlet conditions with a recovered stress")
+HEX27 = Hexahedron(2, kern.HEX27_IJK, "hexahedron27", ghost_penalty=0.01, kappa_dirichlet=640.0)
 #: the element of each order ``cgfem run --order`` accepts
 ORDERS = {1: HEX8, 2: HEX27}
 
