@@ -260,7 +260,7 @@ class SolverOptions:
 
     def __post_init__(self) -> None:
         for name in ("newton_tol", "outer_tol", "kappa_dirichlet"):
-            if name == "kappa_dirichlet" and self.kappa_dirichlet is None:
+            if name == "kappa_dirichlet" and self.kappa_dirichlet is None:   # the element's
                 continue
             value = _finite(name, getattr(self, name))
             if not value > 0.0:
