@@ -238,3 +238,48 @@ def test_held_points_that_change_or_clear_keep_the_outer_loop_going(monkeypatch)
     script = ["p: points 7 (inactive)", "p: points 8 (active)", "p: points 7 (inactive)", ""]
     out, passes = _increment(monkeypatch, script + [""] * 6)
     assert isinstance(out, Increment) and out.outer_converged and passes == 4
+
+
+class _Forces(_System):
+    """:class:`_System` whose forces in play (the bulk internal force) are ``forces``."""
+
+    def __init__(self, contact: _Contact, forces: float):
+        super().__init__(contact)
+        self.forces = forces
+
+    def load_norm(self, t):
+        return 0.0
+
+    def force_scale(self, u):
+        return self.forces
+
+
+@pytest.mark.parametrize("forces, passes", [(1.0, 3), (1.0e4, 2)])
+def test_a_pass_is_tight_only_within_newton_tol_of_the_forces_at_its_solution(monkeypatch, forces, passes):
+    """A displacement-driven increment's first residual (the penalty force ``beta M du_bar``,
+    here 1e4) is no force in play: a Newton solve that ends at half of ``newton_tol`` of it
+    ends the increment only if the forces at the solution are as large; else, the stress
+    having settled, the next pass's Newton is measured against those forces (floored at
+    :data:`ROUND_OFF` of the first residual: 1e-12 / 1e-9 * 1e4 = 10 > 1) and ends there."""
+    import cgfem.solve.outer as outer
+    from cgfem.case.model import SolverOptions
+
+    given = []
+
+    def newton(assemble, u0, solves, *, tol, reference, **kw):
+        first = 1.0e4 if not given else 1.0e-5       # the increment's first residual, then the passes'
+        given.append(reference)
+        ref = max(reference, first)
+        return NewtonResult(u0, True, [first, 0.5 * tol * ref], ref, "converged", tight=True)
+    monkeypatch.setattr(outer, "newton", newton)
+
+    class Solves:
+        frozen, factorizes = False, True
+    out = outer.solve_increment(_Forces(_Contact([""] * 10), forces), Solves(), np.zeros(3), [None], 1.0,
+                                SolverOptions(newton_tol=1e-9, outer_passes=10), lambda m: None)
+    assert isinstance(out, outer.Increment) and out.outer_converged
+    assert len(given) == passes
+    if passes == 3:
+        floor = outer.ROUND_OFF / 1e-9 * 1.0e4
+        assert given == [1.0, 1.0e4, pytest.approx(floor)]
+        assert out.newton_residuals[-1][-1] <= 1e-9 * floor
