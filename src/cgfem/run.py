@@ -50,6 +50,12 @@ BYTES_PER_CUT_ELEMENT = 180_000
 #: the memory of an element of each order relative to the trilinear one: 3.4 times the dofs,
 #: 11 times the scatter map and the element matrices, more fill
 ORDER_MEMORY = {1: 1.0, 2: 12.0}
+#: the Krylov path's memory (no factorization: matrix, AMG hierarchy, vectors) relative to the
+#: estimate above, per element order, with a margin over chain2_steel with nurbs_fe: order 1
+#: at level 3 peaked at 2.62 GiB against 7.0 (0.38), order 2 at level 2 at 9.0 against 16.1
+#: (0.56); about 0.4 GiB of each peak is the interpreter and its libraries, which does not
+#: grow with the level (docs/performance.md, "Memory")
+KRYLOV_MEMORY = {1: 0.45, 2: 0.65}
 
 
 #: the environment variables that set the thread counts of numba, OpenMP, MKL and OpenBLAS
@@ -89,31 +95,41 @@ def brep_measures(solid) -> tuple[float, float]:
     return volume(solid), float(sum(areas_by_name(solid).values()))
 
 
-def estimate_memory(case: Case, level: int, measures: dict[str, tuple[float, float]], order: int = 1
-                    ) -> tuple[int, int]:
+def estimate_memory(case: Case, level: int, measures: dict[str, tuple[float, float]], order: int = 1,
+                    surface: str = "nurbs_fe", krylov_min_dofs: int = DEFAULT_POLICY.krylov_min_dofs
+                    ) -> tuple[int, int, bool]:
     """Estimated bytes and DOFs of ``case`` at ``level`` with elements of ``order`` from the
     B-rep volume and area of every body (``measures``): inside elements ~ V / h^3, cut
-    elements ~ 2 A / h^2, ``order^3`` nodes per element."""
-    total, dofs = 0, 0
+    elements ~ 2 A / h^2, ``order^3`` nodes per element; and whether the Newton systems take
+    the Krylov path (``linear: auto``, at least ``krylov_min_dofs`` unknowns, no fitted
+    surface, whose saddle point is factorized: :mod:`cgfem.solve.solves`), whose estimate is
+    :data:`KRYLOV_MEMORY` times the factorization's."""
+    total, dofs = 0.0, 0
     for body in case.bodies:
         h = body.grid.h(level)
         v, a = measures[body.name]
         inside, cut = v / h**3, 2.0 * a / h**2
-        total += int(ORDER_MEMORY[order] * (BYTES_PER_ELEMENT * inside + BYTES_PER_CUT_ELEMENT * cut))
+        total += ORDER_MEMORY[order] * (BYTES_PER_ELEMENT * inside + BYTES_PER_CUT_ELEMENT * cut)
         dofs += int(3 * order**3 * (inside + cut))
-    return total, dofs
+    krylov = (case.solver.linear == "auto" and dofs >= krylov_min_dofs
+              and not surface_definition(surface).fitted)
+    if krylov:
+        total *= KRYLOV_MEMORY[order]
+    return int(total), dofs, krylov
 
 
 def check_memory(case: Case, level: int, measures: dict[str, tuple[float, float]],
-                 total: int | None = None, order: int = 1) -> None:
+                 total: int | None = None, order: int = 1, surface: str = "nurbs_fe",
+                 krylov_min_dofs: int = DEFAULT_POLICY.krylov_min_dofs) -> None:
     """Refuse a level whose estimated memory (:func:`estimate_memory`, an upper bound;
     docs/performance.md) exceeds the machine's physical memory ``total`` (default :func:`machine_memory`). Not the
     memory free at the moment: in the pipeline other runs hold some of it while they last."""
-    need, dofs = estimate_memory(case, level, measures, order)
+    need, dofs, krylov = estimate_memory(case, level, measures, order, surface, krylov_min_dofs)
     have = machine_memory() if total is None else total
     if need > have:
+        path = "Krylov path" if krylov else "direct solver"
         raise InputError("--level", f"level {level} needs about {_size(need)} "
-                         f"(~{dofs:.2g} DOFs), but this machine has {_size(have)}")
+                         f"(~{dofs:.2g} DOFs, {path}), but this machine has {_size(have)}")
 
 
 def _size(n_bytes: float) -> str:
@@ -157,17 +173,18 @@ def build_models(case: Case, level: int, surface: str, log: Callable[[str], None
     return models, measures
 
 
-def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None], order: int = 1
-                 ) -> tuple[list, dict, dict]:
+def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None], order: int = 1,
+                 policy: SolverPolicy = DEFAULT_POLICY) -> tuple[list, dict, dict]:
     """Embed and discretize every body with the element of ``order``: the models, per-body
-    measures and the solids."""
+    measures and the solids. A level whose memory estimate exceeds the machine's is refused
+    first (:func:`check_memory`; ``policy`` decides whether its systems take the Krylov path)."""
     for i, spec in enumerate(case.contact):
         if spec.rule == "segmented" and not surface_definition(surface).exact_surface:
             raise InputError(f"contact[{i}].rule", "'segmented' needs a NURBS surface definition "
                                                    f"(--surface {' or '.join(NURBS_DEFINITIONS)}), not {surface}")
     solids = {b.name: build_solid(b.geometry) for b in case.bodies}
     brep = {name: brep_measures(solid) for name, solid in solids.items()}
-    check_memory(case, level, brep, order=order)
+    check_memory(case, level, brep, order=order, surface=surface, krylov_min_dofs=policy.krylov_min_dofs)
     finite = case.kinematics == "finite"
     models, measures = [], {}
     for body in case.bodies:
@@ -326,7 +343,7 @@ def run_case(case: Case, level: int, surface: str, out: Path,
     created = check_out(out)
     started = time.perf_counter()
     try:
-        models, measures, solids = build_bodies(case, level, surface, log, order)
+        models, measures, solids = build_bodies(case, level, surface, log, order, policy)
         try:
             out.mkdir(parents=True, exist_ok=True)
         except OSError as err:

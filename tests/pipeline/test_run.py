@@ -144,10 +144,32 @@ def test_memory_guard_compares_with_the_machine_not_the_free_memory():
     from cgfem.run import check_memory, estimate_memory
     case = load_case(CASES / "planar.yaml")
     measures = {b.name: (2.5e-7, 3e-4) for b in case.bodies}
-    need, _ = estimate_memory(case, 3, measures)
+    need, _, _ = estimate_memory(case, 3, measures)
     check_memory(case, 3, measures, total=need + 1)
     with pytest.raises(InputError, match="level 3 needs about .* this machine has"):
         check_memory(case, 3, measures, total=need - 1)
+
+
+def test_memory_estimate_follows_the_solve_path():
+    """Systems that take the Krylov path (``linear: auto``, at least ``krylov_min_dofs``
+    unknowns, no fitted surface) are estimated without a factorization's fill:
+    ``KRYLOV_MEMORY`` times the direct path's estimate, per element order; chain2_steel at
+    level 4 (1.2M unknowns, 41.7 GiB direct) then fits 23 GiB."""
+    from cgfem.case import load_case
+    from cgfem.run import KRYLOV_MEMORY, estimate_memory
+    case = load_case(CASES / "chain2_steel.yaml")
+    measures = {b.name: (4.93e-6, 2.13e-3) for b in case.bodies}     # a half torus link: V, A
+    for order in (1, 2):
+        direct, dofs, krylov = estimate_memory(case, 4, measures, order, "nurbs_fe", krylov_min_dofs=10**9)
+        assert not krylov
+        iterative, same, krylov = estimate_memory(case, 4, measures, order, "nurbs_fe")
+        assert krylov and same == dofs >= 100_000
+        assert iterative == pytest.approx(KRYLOV_MEMORY[order] * direct, rel=1e-9)
+        # nurbs_fit's saddle point is factorized: the direct estimate
+        assert estimate_memory(case, 4, measures, order, "nurbs_fit") == (direct, dofs, False)
+    # a size below the Krylov threshold is the direct path's
+    small = estimate_memory(case, 0, measures, 1, "nurbs_fe")
+    assert small[1] < 100_000 and not small[2]
 
 
 def test_run_rejects_case_errors_like_check(tmp_path, capsys):
