@@ -5,6 +5,7 @@ half-torus links; link_b's tube is the slave, link_a's tube the master).
     python3 -m benchmarks.bench_contact --quick               # under a minute
     python3 -m benchmarks.bench_contact --parts search --points 100000 --search-level 1
     python3 -m benchmarks.bench_contact --parts iteration --levels 1 2 3
+    python3 -m benchmarks.bench_contact --parts iteration --orders 1 2 --levels 0 1
 
 1. **search**: ``--points`` rays against link_a's tube embedded at ``--search-level``,
    deformed by a smooth random displacement field (amplitude 0.2 h). The rays come from
@@ -15,16 +16,16 @@ half-torus links; link_b's tube is the slave, link_a's tube the master).
    seed), run on the first ``--brute`` rays and scaled linearly to all of them; both must
    find the same hits. Then the per-point cost of ``FacetSurface.search`` (the same rays
    against the master's marching-cubes facets at the same level) against the NURBS+FE one.
-2. **iteration**: per level and surface definition the system of ``cgfem run``
-   (``build_bodies`` + ``build_pairs`` + ``System``) at a prescribed state: link_b moved
-   by h/2 towards link_a (a penetration of h/2 at the contact point) plus a smooth random
-   field of amplitude 0.01 h on both links, ``p_N = 0`` frozen (the first outer pass of a
-   step). Timed, best of ``--repeat`` after one warm-up: the bulk residual + tangent of
-   the bodies (``BodyModel.assemble`` and the block-diagonal stacking), the contact residual
-   + tangent (``ContactSet.add``; of it the search alone, ``ContactPair.search``; after the
-   warm-up the previous pairing is known, as from the second Newton iterate on), adding the
-   contact block to the matrix, one linear solve (factorization + solve, backend ``auto``)
-   and the SPR recovery of every body.
+2. **iteration**: per element order (``--orders``), level and surface definition the system
+   of ``cgfem run`` (``build_bodies`` + ``build_pairs`` + ``System``) at a prescribed state:
+   link_b moved by h/2 towards link_a (a penetration of h/2 at the contact point) plus a
+   smooth random field of amplitude 0.01 h on both links, ``p_N = 0`` frozen (the first
+   outer pass of a step). Timed, best of ``--repeat`` after one warm-up: the bulk residual +
+   tangent of the bodies (``BodyModel.assemble`` and the block-diagonal stacking), the
+   contact residual + tangent (``ContactSet.add``; of it the search alone,
+   ``ContactPair.search``; after the warm-up the previous pairing is known, as from the
+   second Newton iterate on), adding the contact block to the matrix, one linear solve
+   (factorization + solve, backend ``auto``) and the SPR recovery of every body.
 3. **run**: one ``cgfem run`` of chain2_steel (``nurbs_fe``, 1 step, a fifth of the pull)
    at ``--run-level`` in a fresh process, its time split by wrapping library functions
    with timers (exclusive times: a timed function called inside another is not counted
@@ -205,14 +206,15 @@ def print_search(r: dict) -> None:
 
 
 # -- 2. per Newton iteration -------------------------------------------------------------------
-def build_system(level: int, definition: str):
-    """The system ``cgfem run`` builds for chain2_steel (bodies, contact pairs, System)."""
+def build_system(level: int, definition: str, order: int = 1):
+    """The system ``cgfem run`` builds for chain2_steel with elements of ``order`` (bodies,
+    contact pairs, System)."""
     from cgfem.case.load import load_case
     from cgfem.run import build_bodies, build_pairs
     from cgfem.solve.system import System
 
     case = load_case(CASE)
-    models, _, solids = build_bodies(case, level, definition, lambda m: None)
+    models, _, solids = build_bodies(case, level, definition, lambda m: None, order)
     return System(models, build_pairs(case, models, solids, definition, lambda m: None))
 
 
@@ -237,13 +239,13 @@ def contact_state(system) -> np.ndarray:
     return u
 
 
-def part_iteration(level: int, definition: str, repeat: int) -> dict:
+def part_iteration(level: int, definition: str, repeat: int, order: int = 1) -> dict:
     import scipy.sparse as sp
 
     from cgfem.solve.backends import choose_backend, factorize
 
     tic = time.perf_counter()
-    system = build_system(level, definition)
+    system = build_system(level, definition, order)
     setup = time.perf_counter() - tic
     u = contact_state(system)
     us = system.split(u)
@@ -286,7 +288,7 @@ def part_iteration(level: int, definition: str, repeat: int) -> dict:
     timings["solve"], du = best_of(lambda: factorize(K, backend=backend, symmetric=system.symmetric,
                                                       near_null=near_null).solve(rhs), repeat)
     active = sum(int(a.sum()) for a in system.contact.active())
-    return {"level": level, "definition": definition, "dofs": system.n_dofs, "setup_s": setup,
+    return {"level": level, "definition": definition, "order": order, "dofs": system.n_dofs, "setup_s": setup,
             "slave_points": sum(p.n_points for p in system.contact.pairs), "active": active,
             "nnz_bulk": int(K_b.nnz), "nnz_contact": int(K_c.nnz), "backend": backend,
             "solve_residual": float(np.linalg.norm(K @ du - rhs) / np.linalg.norm(rhs)),
@@ -296,21 +298,22 @@ def part_iteration(level: int, definition: str, repeat: int) -> dict:
 def print_iteration(rows: list[dict], repeat: int) -> None:
     print(f"\n2. One Newton iteration of chain2_steel (link_b pushed h/2 into link_a + smooth field "
           f"0.01 h, p_N = 0); seconds, best of {repeat} after a warm-up")
-    print(f"{'level':>5} {'surface':<9} {'DOFs':>7} {'slave':>6} {'active':>6} {'bulk R+K':>9} "
+    print(f"{'order':>5} {'level':>5} {'surface':<9} {'DOFs':>7} {'slave':>6} {'active':>6} {'bulk R+K':>9} "
           f"{'contact R+K':>11} {'(search)':>9} {'contact R':>9} {'+Kc':>6} {'solve':>7} {'backend':>8} "
           f"{'SPR':>6} {'contact/bulk':>12} {'peak MiB':>8}")
     for r in rows:
         if "skipped" in r:
-            print(f"{r['level']:>5} {r['definition']:<9}  skipped: {r['skipped']}")
+            print(f"{r['order']:>5} {r['level']:>5} {r['definition']:<9}  skipped: {r['skipped']}")
             continue
-        print(f"{r['level']:>5} {r['definition']:<9} {r['dofs']:>7} {r['slave_points']:>6} {r['active']:>6} "
+        print(f"{r['order']:>5} {r['level']:>5} {r['definition']:<9} {r['dofs']:>7} {r['slave_points']:>6} {r['active']:>6} "
               f"{r['bulk_s']:9.3f} {r['contact_s']:11.3f} {r['search_s']:9.3f} {r['contact_r_s']:9.3f} "
               f"{r['merge_s']:6.3f} {r['solve_s']:7.2f} {r['backend']:>8} {r['recovery_s']:6.3f} "
               f"{r['contact_s'] / r['bulk_s']:12.2f} {r['peak_mib']:8.0f}")
     print("bulk R+K: BodyModel.assemble of both links (elasticity, ghost, weak Dirichlet) + block_diag; "
           "contact R+K: ContactSet.add with the tangent (search, gap derivatives, COO triplets); "
           "contact R: the same without tangent; +Kc: bulk CSR + contact COO; solve: factorize + solve; "
-          "SPR: System.recover. Load averages: " + "; ".join(f"L{r['level']} {r['definition']}: {r['load']}"
+          "SPR: System.recover. Load averages: " + "; ".join(f"order {r['order']} L{r['level']} {r['definition']}: "
+                                                          f"{r['load']}"
                                                           for r in rows if "load" in r))
 
 
@@ -432,7 +435,7 @@ def child(argv: list[str]) -> None:
     if part == "search":
         r = part_search(int(argv[1]), int(argv[2]), int(argv[3]))
     elif part == "iteration":
-        r = part_iteration(int(argv[1]), argv[2], int(argv[3]))
+        r = part_iteration(int(argv[1]), argv[2], int(argv[3]), int(argv[4]))
     else:
         r = part_run(int(argv[1]))
     print(json.dumps(r))
@@ -457,6 +460,8 @@ def main() -> None:
     parser.add_argument("--search-level", type=int, default=1)
     parser.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3], help="levels of part 2")
     parser.add_argument("--surfaces", nargs="+", default=["nurbs_fe", "facets"])
+    parser.add_argument("--orders", type=int, nargs="+", default=[1], choices=(1, 2),
+                        help="element orders of part 2")
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--run-level", type=int, default=1)
     parser.add_argument("--quick", action="store_true",
@@ -474,10 +479,11 @@ def main() -> None:
             print_search(r)
     if "iteration" in args.parts:
         rows = []
-        for level in args.levels:
-            for definition in args.surfaces:
-                r = in_child("iteration", level, definition, args.repeat)
-                rows.append({"level": level, "definition": definition, **r})
+        for order in args.orders:
+            for level in args.levels:
+                for definition in args.surfaces:
+                    r = in_child("iteration", level, definition, args.repeat, order)
+                    rows.append({"level": level, "definition": definition, "order": order, **r})
         print_iteration(rows, args.repeat)
     if "run" in args.parts:
         r = in_child("run", args.run_level)
