@@ -254,13 +254,16 @@ class _Forces(_System):
         return self.forces
 
 
-@pytest.mark.parametrize("forces, passes", [(1.0, 3), (1.0e4, 2)])
-def test_a_pass_is_tight_only_within_newton_tol_of_the_forces_at_its_solution(monkeypatch, forces, passes):
+@pytest.mark.parametrize("forces, passes, last", [(1.0, 3, 1.0), (1.0e4, 2, None), (1.0e-3, 3, 0.1),
+                                                  (1.0e-6, 2, None)])
+def test_a_pass_is_tight_only_within_newton_tol_of_the_forces_at_its_solution(monkeypatch, forces, passes, last):
     """A displacement-driven increment's first residual (the penalty force ``beta M du_bar``,
     here 1e4) is no force in play: a Newton solve that ends at half of ``newton_tol`` of it
     ends the increment only if the forces at the solution are as large; else, the stress
-    having settled, the next pass's Newton is measured against those forces (floored at
-    :data:`ROUND_OFF` of the first residual: 1e-12 / 1e-9 * 1e4 = 10 > 1) and ends there."""
+    having settled, the next pass's Newton is measured against those forces (``last``), at
+    least :data:`ROUND_OFF` of the first residual (1e-14 / 1e-9 * 1e4 = 0.1), and ends there.
+    Forces below :data:`NO_LOAD` of the first residual (1e-6 < 1e-9 * 1e4) are no load: the
+    first residual is the scale."""
     import cgfem.solve.outer as outer
     from cgfem.case.model import SolverOptions
 
@@ -279,7 +282,7 @@ def test_a_pass_is_tight_only_within_newton_tol_of_the_forces_at_its_solution(mo
                                 SolverOptions(newton_tol=1e-9, outer_passes=10), lambda m: None)
     assert isinstance(out, outer.Increment) and out.outer_converged
     assert len(given) == passes
-    if passes == 3:
-        floor = outer.ROUND_OFF / 1e-9 * 1.0e4
-        assert given == [1.0, 1.0e4, pytest.approx(floor)]
-        assert out.newton_residuals[-1][-1] <= 1e-9 * floor
+    assert given[:2] == [forces, 1.0e4]
+    if last is not None:
+        assert given[2] == pytest.approx(last)
+        assert out.newton_residuals[-1][-1] <= 1e-9 * last

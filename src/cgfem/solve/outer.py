@@ -26,11 +26,16 @@ Log = Callable[[str], None]
 #: their rule (:class:`IncrementFailure`)
 UNSETTLED = "contact_unsettled"
 #: a pass is accepted when Newton's residual is within ``newton_tol`` of the forces in play at
-#: its solution, or within this fraction of the increment's first residual, whichever is
-#: larger: the penalty forces ``beta M u`` summed into the residual leave round-off of about
-#: 1e-13 of them (chain3 with link C held by one contact point, 1.6e-13), which is all a state
-#: with no forces in play (a body that moved rigidly) can reach
-ROUND_OFF = 1e-12
+#: its solution, or within this fraction of the increment's first residual (the penalty force
+#: ``beta M du_bar`` of a displacement-driven step), whichever is larger: the round-off of the
+#: penalty forces summed into the residual, about 50 eps of them
+ROUND_OFF = 1e-14
+#: a state whose forces in play are below this fraction of the increment's first residual
+#: carries no load (its bodies moved rigidly, or one hangs free); the first residual is then
+#: the only force scale, and the pass is accepted within ``newton_tol`` of it. Its tangent may
+#: be numerically singular (chain3 with ``facets`` at level 0, link C on one contact point or
+#: none), so that no solve could go further
+NO_LOAD = 1e-9
 
 
 @dataclass(frozen=True)
@@ -268,7 +273,8 @@ def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray 
         # kappa_D, to 1e4 times the forces in play): a pass is tight only within newton_tol
         # of the forces at its solution, and once the stress has settled the next pass's
         # Newton is measured against them
-        forces = max(system.load_norm(t), system.force_scale(u), ROUND_OFF / options.newton_tol * first)
+        forces = max(system.load_norm(t), system.force_scale(u))
+        forces = first if forces < NO_LOAD * first else max(forces, ROUND_OFF / options.newton_tol * first)
         tight = result.converged and history[-1] <= options.newton_tol * forces
         if changes[-1] <= options.outer_tol and not tight:
             reference = forces
