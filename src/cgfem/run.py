@@ -40,6 +40,7 @@ from cgfem.results import clear_previous, write_json_atomic, write_step
 from cgfem.solve.linear import available_backends, mkl_threads
 from cgfem.solve.static import StepRecord, solve_static
 from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
+from cgfem.solve.solves import KRYLOV, solve_path
 from cgfem.solve.system import System
 
 #: bytes per inside and per cut trilinear element: pattern scatter map, quadrature, tangent
@@ -111,8 +112,7 @@ def estimate_memory(case: Case, level: int, measures: dict[str, tuple[float, flo
         inside, cut = v / h**3, 2.0 * a / h**2
         total += ORDER_MEMORY[order] * (BYTES_PER_ELEMENT * inside + BYTES_PER_CUT_ELEMENT * cut)
         dofs += int(3 * order**3 * (inside + cut))
-    krylov = (case.solver.linear == "auto" and dofs >= krylov_min_dofs
-              and not surface_definition(surface).fitted)
+    krylov = solve_path(case.solver.linear, surface_definition(surface).fitted, dofs, krylov_min_dofs) == KRYLOV
     if krylov:
         total *= KRYLOV_MEMORY[order]
     return int(total), dofs, krylov

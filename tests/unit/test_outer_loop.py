@@ -210,7 +210,7 @@ def _increment(monkeypatch, script):
     from cgfem.case.model import SolverOptions
 
     monkeypatch.setattr(outer, "newton", lambda assemble, u0, solves, **kw: NewtonResult(
-        u0, True, [1.0, 1e-12], 1.0, "converged", tight=True))
+        u0, True, [1.0, 1e-12], 1.0, "converged"))
 
     class Solves:
         frozen, factorizes = False, True
@@ -273,7 +273,7 @@ def test_a_pass_is_tight_only_within_newton_tol_of_the_forces_at_its_solution(mo
         first = 1.0e4 if not given else 1.0e-5       # the increment's first residual, then the passes'
         given.append(reference)
         ref = max(reference, first)
-        return NewtonResult(u0, True, [first, 0.5 * tol * ref], ref, "converged", tight=True)
+        return NewtonResult(u0, True, [first, 0.5 * tol * ref], ref, "converged")
     monkeypatch.setattr(outer, "newton", newton)
 
     class Solves:

@@ -25,8 +25,9 @@ looser (the forcing ``eta_k ~ |r_k|`` of Dembo-Eisenstat-Steihaug, which keeps N
 quadratic convergence): the first iterations, far from the solution, need few digits.
 
 ``loose``: the solve may stop once ``|r| <= loose * |r(u0)|`` (an outer pass that is not the
-last needs no more: the frozen stress it is solved with changes next pass); the result's
-``tight`` says whether ``|r| <= tol * reference`` was reached as well.
+last needs no more: the frozen stress it is solved with changes next pass). Whether a pass
+is accurate enough to end its increment is the outer loop's call
+(:func:`cgfem.solve.outer.solve_increment`).
 """
 
 from __future__ import annotations
@@ -57,8 +58,6 @@ class NewtonResult:
     residuals: list[float] = field(default_factory=list)
     reference: float = 0.0
     reason: str = ""
-    #: converged to ``tol * reference`` (not only to the ``loose`` bound)
-    tight: bool = False
 
 
 def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0: np.ndarray,
@@ -135,7 +134,6 @@ def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0
         else:
             result.reason = "max_iterations"
     result.u = u
-    result.tight = result.converged and norm <= tol * reference
     return result
 
 

@@ -164,6 +164,17 @@ class Anderson:
         return out
 
 
+def forces_in_play(system, u: np.ndarray, t: float, first: float, newton_tol: float) -> float:
+    """The force scale a pass's residual is accepted against (N): the larger of the dead loads
+    at ``t`` and the bulk internal force at ``u``, at least :data:`ROUND_OFF` / ``newton_tol``
+    times the increment's first residual ``first``; ``first`` itself when the forces are below
+    :data:`NO_LOAD` of it (a state that carries no load)."""
+    forces = max(system.load_norm(t), system.force_scale(u))
+    if forces < NO_LOAD * first:
+        return first
+    return max(forces, ROUND_OFF / newton_tol * first)
+
+
 def newton_pass(attempt: Callable[[np.ndarray, bool], NewtonResult], u: np.ndarray,
                 modified_first: bool) -> tuple[NewtonResult, list[float]]:
     """One outer pass's Newton solve from ``u``: ``attempt(start, fixed_tangent)`` runs
@@ -271,13 +282,15 @@ def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray 
         # Newton's reference includes the increment's first residual, which in a displacement-
         # driven increment is the weak-Dirichlet penalty's force beta M du_bar (it grows with
         # kappa_D, to 1e4 times the forces in play): a pass is tight only within newton_tol
-        # of the forces at its solution, and once the stress has settled the next pass's
-        # Newton is measured against them
-        forces = max(system.load_norm(t), system.force_scale(u))
-        forces = first if forces < NO_LOAD * first else max(forces, ROUND_OFF / options.newton_tol * first)
-        tight = result.converged and history[-1] <= options.newton_tol * forces
-        if changes[-1] <= options.outer_tol and not tight:
-            reference = forces
+        # of the forces at its solution, and the next pass's Newton is measured against them.
+        # Tightness decides nothing before the stress has settled (the bulk internal force
+        # costs an assembly), so it is measured only then
+        tight = False
+        if changes[-1] <= options.outer_tol:
+            forces = forces_in_play(system, u, t, first, options.newton_tol)
+            tight = history[-1] <= options.newton_tol * forces
+            if not tight:
+                reference = forces
         if contact:
             previous, active = active, contact.active()
             switched = active_changes(active, previous)
@@ -289,8 +302,7 @@ def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray 
             # a pass that settled but for the same held points as the pass before: the next
             # pass starts from the same state with the same frozen stress and repeats it
             unsettled = contact.contradicted_state() if (
-                outer > 1 and switched == 0 and contradicted and tight
-                and changes[-1] <= options.outer_tol) else None
+                outer > 1 and switched == 0 and contradicted and tight) else None
             if unsettled is not None and unsettled == unsettled_before:
                 which = contact.describe_contradicted()
                 log(f"t={t:.4g}: contact does not settle ({which})")

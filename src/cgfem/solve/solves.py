@@ -36,6 +36,14 @@ from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
 DIRECT, KRYLOV = "direct", "krylov"
 
 
+def solve_path(backend: str, indefinite: bool, n: int, krylov_min_dofs: int) -> str:
+    """:data:`KRYLOV` for ``auto`` on a system of at least ``krylov_min_dofs`` unknowns that is
+    not a saddle point (``indefinite``: ``nurbs_fit``'s fit constraints), else :data:`DIRECT`."""
+    if backend == "auto" and not indefinite and n >= krylov_min_dofs:
+        return KRYLOV
+    return DIRECT
+
+
 class LinearSolves:
     """Linear solves of one system's Newton matrices (n, n).
 
@@ -79,11 +87,8 @@ class LinearSolves:
         return self._n is None or self.path(self._n) == DIRECT
 
     def path(self, n: int) -> str:
-        """:data:`KRYLOV` for ``auto`` on a system of at least ``policy.krylov_min_dofs``
-        unknowns that is not a saddle point, else :data:`DIRECT`."""
-        if self.backend == "auto" and not self.indefinite and n >= self.policy.krylov_min_dofs:
-            return KRYLOV
-        return DIRECT
+        """The path of a system of ``n`` unknowns (:func:`solve_path`)."""
+        return solve_path(self.backend, self.indefinite, n, self.policy.krylov_min_dofs)
 
     def __call__(self, K: sp.csr_matrix | None, b: np.ndarray, rtol: float | None = None) -> np.ndarray:
         """The solution of ``K x = b``; ``rtol``: the relative residual an iterative solve may
