@@ -58,15 +58,17 @@ def newton_iterations(summary: dict) -> int:
 def test_krylov_path_solves_the_steel_chain_to_the_direct_solution(tmp_path):
     """chain2_steel's first step at level 1 (finite strain: GMRES; the onset of contact): the
     Krylov path reaches the direct path's reactions and contact force to 1e-8 and the same
-    active set, with about as many Newton iterations (full Newton in every pass instead of
-    modified Newton after the first), and logs every solve with its iterations."""
+    active set, and logs every solve with its iterations. Its passes but the last stop Newton
+    once the residual has halved (``krylov_pass_tolerance``), which saves Newton iterations:
+    measured 9 against the direct path's 14 (modified ones counted), and 14 with every pass
+    solved to ``newton_tol``."""
     case = first_step("chain2_steel")
     direct, _ = solve(case, 1, "nurbs_fe", tmp_path / "direct", SolverPolicy())
     krylov, lines = solve(case, 1, "nurbs_fe", tmp_path / "krylov", KRYLOV)
     a, b = reactions(direct), reactions(krylov)
     assert np.abs(a - b).max() <= 1e-8 * np.abs(a).max()
     assert direct["steps"][-1]["contact"]["active_points"] == krylov["steps"][-1]["contact"]["active_points"] > 10
-    assert newton_iterations(krylov) <= newton_iterations(direct) + 4
+    assert newton_iterations(krylov) <= newton_iterations(direct) - 3
     solves = [line for line in lines if line.startswith("linear: gmres")]
     assert len(solves) == newton_iterations(krylov)
     assert sum("preconditioner kept" in line for line in solves) > len(solves) // 2

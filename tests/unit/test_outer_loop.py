@@ -286,3 +286,43 @@ def test_a_pass_is_tight_only_within_newton_tol_of_the_forces_at_its_solution(mo
     if last is not None:
         assert given[2] == pytest.approx(last)
         assert out.newton_residuals[-1][-1] <= 1e-9 * last
+
+
+class _Settling(_System):
+    """:class:`_System` whose recovered stress settles over the passes: relative changes of
+    about 1 (from nothing), 1e-2, 1e-5 and 1e-8, without acceleration."""
+
+    def __init__(self, contact: _Contact):
+        from dataclasses import replace
+
+        super().__init__(contact)
+        self.policy = replace(self.policy, acceleration="none")
+        self.scales = iter([1.0, 1.01, 1.01001, 1.0100100001])
+
+    def recover(self, u):
+        return [np.full((2, 3, 3), next(self.scales))]
+
+
+@pytest.mark.parametrize("factorizes, expected", [(False, [0.5, 0.5, 0.5, 0.0]), (True, [0.0] * 4)])
+def test_passes_but_the_last_stop_newton_early_only_on_the_krylov_path(monkeypatch, factorizes, expected):
+    """On the Krylov path (no factorization to keep) Newton stops at ``krylov_pass_tolerance``
+    of a pass's first residual while the stress still changes by more than ``100 outer_tol``
+    (passes 1-3 here), and the pass after that is solved to ``newton_tol``; on the direct path
+    every pass is (``pass_tolerance`` 0)."""
+    import cgfem.solve.outer as outer
+    from cgfem.case.model import SolverOptions
+
+    loose = []
+
+    def newton(assemble, u0, solves, **kw):
+        loose.append(kw["loose"])
+        return NewtonResult(u0, True, [1.0, 1e-12], 1.0, "converged")
+    monkeypatch.setattr(outer, "newton", newton)
+
+    class Solves:
+        frozen = False
+    Solves.factorizes = factorizes
+    out = outer.solve_increment(_Settling(_Contact([""] * 10)), Solves(), np.zeros(3), [None], 1.0,
+                                SolverOptions(outer_tol=1e-6, outer_passes=10), lambda m: None)
+    assert isinstance(out, outer.Increment) and out.outer_converged
+    assert loose == expected

@@ -31,7 +31,11 @@ class SolverPolicy:
         ``min(forcing_max, |r| / reference)`` where that is looser (0: off).
     pass_tolerance : an outer pass that is not the last (the recovered stress still changing by
         more than ``100 outer_tol``) stops Newton at ``pass_tolerance`` times its first residual,
-        or at ``newton_tol`` if that is reached first (0: every pass to ``newton_tol``).
+        or at ``newton_tol`` if that is reached first (0: every pass to ``newton_tol``), on the
+        direct path.
+    krylov_pass_tolerance : the same on the Krylov path, where every Newton iteration costs a
+        full Krylov solve: at 0.5 each pass but the last takes about one Newton iteration, and
+        the outer loop and Newton converge together.
     predictor : the start of a load increment: ``"none"`` (the last converged state) or
         ``"secant"`` (extrapolated linearly in the load factor from the last two).
     acceleration : the outer loop's fixed-point acceleration of the frozen recovered stress
@@ -85,6 +89,7 @@ class SolverPolicy:
     forcing: float = 0.1
     forcing_max: float = 1e-3
     pass_tolerance: float = 0.0
+    krylov_pass_tolerance: float = 0.5
     predictor: str = "none"
     acceleration: str = "aitken"
     anderson_depth: int = 3
