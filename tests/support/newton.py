@@ -20,8 +20,9 @@ def record_errors(monkeypatch) -> list[dict]:
     exact steps to round-off, and the list returned gets, per solve, its iterates' errors
     against that ``u*`` (``errors``), its ``residuals``, ``tail`` (the norms of the extra
     steps), ``order``: the order of Newton's map along the direction of its last iterate
-    whose next error is above ``FLOOR`` (see the module's docstring), and ``constant``: that
-    iterate's ``e_k+1 / e_k^2``, the errors taken relative to the first."""
+    whose next error is above ``FLOOR`` (see the module's docstring), ``probes``: the two
+    new errors that order is read from, and ``constant``: that iterate's ``e_k+1 / e_k^2``,
+    the errors taken relative to the first."""
     solves: list[dict] = []
     newton = outer.newton
 
@@ -52,13 +53,14 @@ def record_errors(monkeypatch) -> list[dict]:
         # (none: a solve that ends in one step; its order and constant are NaN, and fail)
         k = max((k for k in range(len(errors) - 1) if errors[k + 1] > FLOOR * errors[0]), default=None)
         order = constant = float("nan")
+        new = [float("nan")] * 2
         if k is not None:
             d = (accepted[k] - u) / errors[k]
             new = [float(np.linalg.norm(step(u + eps * d) - u)) for eps in (errors[k], errors[k] / SHRINK)]
             order = float(np.log(new[0] / new[1]) / np.log(SHRINK))
             constant = errors[k + 1] / errors[k] ** 2 * errors[0]
         solves.append({"errors": errors, "residuals": list(result.residuals), "tail": tail,
-                       "order": order, "constant": constant})
+                       "order": order, "probes": new, "constant": constant})
         return result
     monkeypatch.setattr(outer, "newton", wrapped)
     return solves
