@@ -24,7 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from cgfem.solve.linear import LinearSolverError
+from cgfem.solve.linear import LinearSolverError, smoothed_aggregation
 
 #: inner iterations of one GMRES cycle
 RESTART = 50
@@ -52,8 +52,6 @@ class AMGPreconditioner:
     ``operator_complexity``."""
 
     def __init__(self, A: sp.csr_matrix, near_null: np.ndarray | None, symmetric: bool):
-        import pyamg
-
         tic = time.perf_counter()
         A = sp.csr_matrix(A, dtype=np.float64)
         d = A.diagonal()
@@ -71,7 +69,7 @@ class AMGPreconditioner:
         # one forward block Gauss-Seidel sweep before the coarse correction and one backward
         # after it (a symmetric V-cycle for CG): pyamg's default symmetric sweeps on both
         # sides cost a third more per GMRES solve for the same iterations within 20 %
-        self._ml = pyamg.smoothed_aggregation_solver(
+        self._ml = smoothed_aggregation(
             As, B=B, symmetry="hermitian" if symmetric else "nonsymmetric",
             presmoother=("block_gauss_seidel", {"sweep": "forward"}),
             postsmoother=("block_gauss_seidel", {"sweep": "backward"}), **kwargs)

@@ -42,6 +42,27 @@ MAX_ITERATIONS = 1000  #: bound on the Krylov iterations of one pyamg solve
 GMRES_RESTART = 50
 
 
+#: the seed of numpy's global generator while pyamg builds a hierarchy (:func:`smoothed_aggregation`)
+AMG_SEED = 2026
+
+
+def smoothed_aggregation(A: sp.spmatrix, **kwargs: Any):
+    """pyamg's smoothed-aggregation hierarchy of ``A`` (``kwargs`` as
+    ``pyamg.smoothed_aggregation_solver``'s), built with numpy's global generator seeded at
+    :data:`AMG_SEED` and restored afterwards. pyamg's spectral-radius estimates (the
+    prolongation smoother's weight on every level) start from a random vector of that
+    generator: without the seed two set-ups of the same matrix differ at round-off, and so
+    do the Krylov iterates and a run's contact decisions after them."""
+    import pyamg
+
+    state = np.random.get_state()
+    np.random.seed(AMG_SEED)
+    try:
+        return pyamg.smoothed_aggregation_solver(A, **kwargs)
+    finally:
+        np.random.set_state(state)
+
+
 class LinearSolverError(RuntimeError):
     """The system could not be solved: singular matrix, no convergence, NaN or inf."""
 
@@ -239,8 +260,6 @@ class _AMG(LinearSolver):
 
     def __init__(self, A: sp.csr_matrix, symmetric: bool, near_null: np.ndarray | None,
                  rtol: float) -> None:
-        import pyamg
-
         super().__init__(A.shape[0])
         d = A.diagonal()
         if np.any(d == 0.0) or (symmetric and np.any(d < 0.0)):
@@ -256,8 +275,7 @@ class _AMG(LinearSolver):
         if self.n % 3 == 0:  # nodal aggregation (3x3 blocks): 2x fewer iterations without B
             As = As.tobsr(blocksize=(3, 3))
         kwargs: dict[str, Any] = {"improve_candidates": None} if B is not None else {}
-        self._ml = pyamg.smoothed_aggregation_solver(
-            As, B=B, symmetry="hermitian" if symmetric else "nonsymmetric", **kwargs)
+        self._ml = smoothed_aggregation(As, B=B, symmetry="hermitian" if symmetric else "nonsymmetric", **kwargs)
         self._As, self._M = self._ml.levels[0].A, self._ml.aspreconditioner()  # one copy of A
         self.info.update(krylov="cg" if symmetric else "gmres", levels=len(self._ml.levels),
                          operator_complexity=float(self._ml.operator_complexity()))

@@ -38,7 +38,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from cgfem.solve.linear import LinearSolver, LinearSolverError, build
+from cgfem.solve.linear import LinearSolver, LinearSolverError, build, smoothed_aggregation
 
 #: entries of a row of ``C = M^-1 G`` below this fraction of its largest are left out of the
 #: preconditioner (the choice is measured in docs/performance.md)
@@ -131,8 +131,6 @@ class ReducedSaddleSolver(LinearSolver):
             self.info["factor_nnz"] = int(factor.info.get("factor_nnz", 0))
             self._precondition = factor.solve_unchecked
             return
-        import pyamg
-
         s = 1.0 / np.sqrt(d)
         Ps = (sp.diags(s) @ P @ sp.diags(s)).tocsr()
         B = None if near_null is None else near_null[:n_u] / s[:, None]
@@ -142,8 +140,7 @@ class ReducedSaddleSolver(LinearSolver):
         if n_u % 3 == 0:
             Ps = Ps.tobsr(blocksize=(3, 3))
         kwargs = {"improve_candidates": None} if B is not None else {}
-        ml = pyamg.smoothed_aggregation_solver(Ps, B=B, symmetry="hermitian" if symmetric else "nonsymmetric",
-                                               **kwargs)
+        ml = smoothed_aggregation(Ps, B=B, symmetry="hermitian" if symmetric else "nonsymmetric", **kwargs)
         self._precondition = lambda r: s * ml.solve(s * r, tol=1e-8, maxiter=1, cycle="V")
 
     def _fit_rows(self, c: FitConstraint, rows: np.ndarray) -> sp.csr_matrix:
