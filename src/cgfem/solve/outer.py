@@ -235,7 +235,7 @@ def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray 
         u = start
     # a pass that is not the last needs Newton only to a fraction of its first residual: on
     # the Krylov path, where a later pass cannot use modified Newton's cheap solves, that
-    # saves whole Newton iterations (chain2_steel, level 1: 39 instead of 61)
+    # saves whole Newton iterations (docs/methods/elasticity.md, "Loose passes")
     pass_tolerance = policy.pass_tolerance if solves.factorizes else policy.krylov_pass_tolerance
     for outer in range(1, options.outer_passes + 1):
         loose = pass_tolerance if (outer == 1 or changes[-1] > 100.0 * options.outer_tol) else 0.0
