@@ -37,13 +37,11 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 class Timer:
-    """Seconds and calls of the wrapped callables, per name; nested calls of the same name
-    (a body's assembly inside another) are not counted twice."""
+    """Seconds and calls of the wrapped callables, per name."""
 
     def __init__(self):
         self.seconds: dict[str, float] = {}
         self.calls: dict[str, int] = {}
-        self._depth: dict[str, int] = {}
 
     def wrap(self, owner, attribute: str, name: str, when=lambda *a, **k: True) -> None:
         """Time ``owner.attribute`` under ``name`` on the calls for which ``when(*args)``."""
@@ -52,14 +50,12 @@ class Timer:
 
         @functools.wraps(original)
         def timed(*args, **kwargs):
-            if not when(*args, **kwargs) or timer._depth.get(name, 0):
+            if not when(*args, **kwargs):
                 return original(*args, **kwargs)
-            timer._depth[name] = 1
             tic = time.perf_counter()
             try:
                 return original(*args, **kwargs)
             finally:
-                timer._depth[name] = 0
                 timer.seconds[name] = timer.seconds.get(name, 0.0) + time.perf_counter() - tic
                 timer.calls[name] = timer.calls.get(name, 0) + 1
         setattr(owner, attribute, timed)

@@ -3,6 +3,8 @@ Newton attempts of a pass (modified Newton first, then full Newton from its best
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -319,10 +321,8 @@ def test_passes_but_the_last_stop_newton_early_only_on_the_krylov_path(monkeypat
         return NewtonResult(u0, True, [1.0, 1e-12], 1.0, "converged")
     monkeypatch.setattr(outer, "newton", newton)
 
-    class Solves:
-        frozen = False
-    Solves.factorizes = factorizes
-    out = outer.solve_increment(_Settling(_Contact([""] * 10)), Solves(), np.zeros(3), [None], 1.0,
+    solves = SimpleNamespace(frozen=False, factorizes=factorizes)
+    out = outer.solve_increment(_Settling(_Contact([""] * 10)), solves, np.zeros(3), [None], 1.0,
                                 SolverOptions(outer_tol=1e-6, outer_passes=10), lambda m: None)
     assert isinstance(out, outer.Increment) and out.outer_converged
     assert loose == expected

@@ -24,11 +24,3 @@ def test_stacked_blocks_are_scipys_block_diagonal_array_for_array(extra):
     x = np.random.default_rng(1).standard_normal(15 + extra)
     assert np.array_equal(found @ x, expected @ x)
 
-
-def test_stacked_blocks_keep_each_block_in_its_place():
-    """Block ``k`` occupies rows and columns ``start_k : start_k + n_k``; nothing else is set."""
-    blocks = [sp.csr_matrix(np.full((2, 2), 1.0)), sp.csr_matrix(np.full((3, 3), 2.0))]
-    dense = stack_diagonal(blocks, 1).toarray()
-    expected = np.zeros((6, 6))
-    expected[:2, :2], expected[2:5, 2:5] = 1.0, 2.0
-    assert np.array_equal(dense, expected)

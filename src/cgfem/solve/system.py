@@ -24,20 +24,19 @@ from cgfem.solve.saddle import FitConstraint
 
 
 def stack_diagonal(blocks: list[sp.spmatrix], extra: int = 0) -> sp.csr_matrix:
-    """The square ``blocks`` on the diagonal of one CSR matrix, in order, followed by ``extra``
-    empty rows and columns: their CSR arrays concatenated, each block's column indices
-    shifted by the sizes before it. For blocks in canonical form the arrays are those of
-    ``scipy.sparse.block_diag(..., format="csr")``, without its round trip through COO."""
+    """The square ``blocks`` (at least one) on the diagonal of one CSR matrix, in order,
+    followed by ``extra`` empty rows and columns: their CSR arrays concatenated, each block's
+    column indices shifted by the sizes before it. For blocks in canonical form the arrays are
+    those of ``scipy.sparse.block_diag(..., format="csr")``, without its round trip through COO."""
     mats = [sp.csr_matrix(K) for K in blocks]
-    starts = np.concatenate([[0], np.cumsum([K.shape[0] for K in mats], dtype=np.int64)])
-    nnz = np.concatenate([[0], np.cumsum([K.nnz for K in mats], dtype=np.int64)])
+    starts = np.cumsum([0] + [K.shape[0] for K in mats])
+    nnz = np.cumsum([0] + [K.nnz for K in mats])
     n = int(starts[-1]) + extra
     index = np.int32 if max(n, int(nnz[-1])) < 2**31 else np.int64
-    data = np.concatenate([K.data for K in mats]) if mats else np.zeros(0)
-    indices = np.concatenate([K.indices.astype(index) + index(s) for K, s in zip(mats, starts)]) \
-        if mats else np.zeros(0, index)
-    indptr = np.concatenate([[0]] + [K.indptr[1:].astype(index) + index(z) for K, z in zip(mats, nnz)]
-                            + [np.full(extra, nnz[-1], index)]).astype(index)
+    data = np.concatenate([K.data for K in mats])
+    indices = np.concatenate([K.indices.astype(index) + index(s) for K, s in zip(mats, starts)])
+    indptr = np.concatenate([np.zeros(1, index)] + [K.indptr[1:].astype(index) + index(z) for K, z in zip(mats, nnz)]
+                            + [np.full(extra, nnz[-1], index)])
     return sp.csr_matrix((data, indices, indptr), shape=(n, n))
 
 
