@@ -129,6 +129,30 @@ def test_finite_strain_pair_tangent_is_the_derivative_of_the_residual():
         > 1e-2 * np.linalg.norm(Kv)
 
 
+def test_an_assembly_at_the_same_unknowns_reuses_the_bodies_tangent_bit_for_bit():
+    """The bodies' tangent depends on the unknowns alone, not on the load factor or the
+    frozen stress: a new outer pass that starts where the last one ended reuses it, and gets
+    the residual and tangent a fresh system assembles, to the last bit."""
+    _, (box, ball) = _pair("neo_hookean", 3.0e6, 1.0e6)
+    rng = np.random.default_rng(3)
+    n = box.n_dofs + ball.n_dofs
+    u, v = 1e-3 * rng.normal(size=n), 1e-3 * rng.normal(size=n)
+    system = System([box, ball])
+    frozen_a = system.recover(u)
+    frozen_b = [2.0 * f for f in system.recover(v)]
+    assemble(system, u, 0.8, frozen_a, True)
+    kept = system._bodies_tangent[1]
+    cases = [(u, 0.5, frozen_b, True), (v, 0.5, frozen_b, False), (v, 1.0, frozen_a, True)]
+    for x, t, frozen, reused in cases:
+        r, K = assemble(system, x, t, frozen, True)
+        r_fresh, K_fresh = assemble(System([box, ball]), x, t, frozen, True)
+        assert (system._bodies_tangent[1] is kept) == reused
+        kept = system._bodies_tangent[1]
+        assert np.array_equal(r, r_fresh)
+        for name in ("indptr", "indices", "data"):
+            assert np.array_equal(getattr(K, name), getattr(K_fresh, name)), name
+
+
 @pytest.mark.parametrize("components, free", [({"x": 0, "y": 0, "z": 0}, 0), ({"x": 0, "y": 0}, 1), (None, 6)])
 def test_free_rigid_modes_of_a_body(components, free):
     """A box on face xmin: clamped holds every rigid motion; held along x and y only it

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from cgfem.solve.system import stack_diagonal
+from cgfem.solve.system import DiagonalStack, add_couplings, stack_diagonal
 
 
 @pytest.mark.parametrize("extra", [0, 4])
@@ -24,3 +24,40 @@ def test_stacked_blocks_are_scipys_block_diagonal_array_for_array(extra):
     x = np.random.default_rng(1).standard_normal(15 + extra)
     assert np.array_equal(found @ x, expected @ x)
 
+
+
+def test_kept_structure_stacks_new_values_and_rebuilds_on_a_new_structure():
+    """While the blocks' index arrays are the same memory only the values are new: the result
+    equals :func:`stack_diagonal` of the new blocks; blocks of another structure rebuild it."""
+    rng = np.random.default_rng(4)
+    base = [sp.random(n, n, density=0.4, format="csr", random_state=n) + sp.eye(n, format="csr") for n in (6, 4)]
+    stack = DiagonalStack(extra=3)
+
+    def revalued(blocks):
+        return [sp.csr_matrix((rng.standard_normal(K.nnz), K.indices, K.indptr), shape=K.shape) for K in blocks]
+    first = stack(base)
+    for blocks in (revalued(base), revalued(base), [sp.eye(4, format="csr"), sp.eye(6, format="csr")]):
+        found, expected = stack(blocks), stack_diagonal(blocks, 3)
+        for name in ("indptr", "indices", "data"):
+            assert np.array_equal(getattr(found, name), getattr(expected, name)), name
+    assert stack(revalued(base)).indices is not first.indices   # the last call rebuilt
+
+
+def test_couplings_are_added_entry_for_entry_as_scipy_adds_them():
+    """A tangent with explicit zeros (pattern entries nothing was added to) plus couplings
+    with duplicates, entries outside the pattern and one that cancels an entry exactly: the
+    CSR arrays of scipy's ``K + C``, zeros dropped as scipy drops them."""
+    rng = np.random.default_rng(2)
+    K = sp.random(60, 60, density=0.3, format="csr", random_state=3) + sp.eye(60, format="csr")
+    K.data[::6] = 0.0
+    rows, cols = rng.integers(0, 60, 80), rng.integers(0, 60, 80)
+    vals = rng.standard_normal(80)
+    k = np.flatnonzero(K.data)[4]
+    row = np.searchsorted(K.indptr, k, side="right") - 1
+    rows, cols = np.append(rows, [row, rows[0]]), np.append(cols, [K.indices[k], cols[0]])
+    vals = np.append(vals, [-K.data[k], 0.5])                  # a cancellation and a duplicate
+    C = sp.coo_matrix((vals, (rows, cols)), shape=K.shape)
+    found, expected = add_couplings(K, C), K + C.tocsr()
+    assert expected.nnz < K.nnz + C.nnz
+    for name in ("indptr", "indices", "data"):
+        assert np.array_equal(getattr(found, name), getattr(expected, name)), name

@@ -21,7 +21,8 @@ from cgfem.fem.space import Space
 class Pattern:
     """CSR structure of a (n_dofs x n_dofs) matrix over one space.
 
-    indptr, indices : CSR arrays (int64)
+    indptr, indices : CSR arrays, in the index type scipy gives a matrix of this size (int32
+        while the size and the nonzeros allow it), so that :meth:`matrix` shares them
     scatter : (n_elements, nd^2) data position of entry ``(m, n)`` of element ``e`` at
         ``[e, nd m + n]``, ``nd`` the element's dofs (24 for the trilinear element, 81 for the
         triquadratic one)
@@ -80,4 +81,7 @@ def build_pattern(space: Space, extra_pairs: np.ndarray | None = None) -> Patter
     nd = space.element.n_dofs
     scatter = np.empty((space.n_elements, nd * nd), np.int32 if nnz < 2**31 - 1 else np.int64)
     indptr, indices = dof_pattern(node_ptr, nbr, conn, scatter)
-    return Pattern(space.n_dofs, indptr, indices, scatter, colours(space))
+    # scipy converts the index arrays to the smallest type that holds them on every matrix():
+    # converted once here instead (calloc'ed zeros: the values cost no memory traffic)
+    shaped = sp.csr_matrix((np.zeros(nnz), indices, indptr), shape=(space.n_dofs, space.n_dofs))
+    return Pattern(space.n_dofs, shaped.indptr, shaped.indices, scatter, colours(space))

@@ -19,6 +19,7 @@ from cgfem.solve.floating import STRETCH_FLOOR_H, FloatingBodies, rotation_stret
 from cgfem.solve.items import Block, BodyItem
 from cgfem.solve.linear import rigid_body_modes
 from cgfem.solve.onset import OnsetLimit
+from cgfem.solve._sparse_kernels import add_csr
 from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
 from cgfem.solve.saddle import FitConstraint
 
@@ -38,6 +39,44 @@ def stack_diagonal(blocks: list[sp.spmatrix], extra: int = 0) -> sp.csr_matrix:
     indptr = np.concatenate([np.zeros(1, index)] + [K.indptr[1:].astype(index) + index(z) for K, z in zip(mats, nnz)]
                             + [np.full(extra, nnz[-1], index)])
     return sp.csr_matrix((data, indices, indptr), shape=(n, n))
+
+
+def add_couplings(K: sp.csr_matrix, C: sp.spmatrix) -> sp.csr_matrix:
+    """``K + C`` (n, n), entry for entry scipy's sum (sorted columns, exact zeros left out),
+    merged row by row by a kernel that copies the rows ``C`` does not touch: the contact
+    couplings' thousands of entries against the bodies' millions."""
+    C = sp.csr_matrix(C)
+    C.sum_duplicates()
+    if not K.has_canonical_format:
+        return sp.csr_matrix(K + C)
+    index = K.indices.dtype
+    indptr, indices, data = add_csr(K.indptr, K.indices, K.data, C.indptr.astype(index),
+                                    C.indices.astype(index), C.data.astype(np.float64))
+    return sp.csr_matrix((data, indices, indptr), shape=K.shape)
+
+
+class DiagonalStack:
+    """:func:`stack_diagonal` for blocks whose structure does not change (the bodies' fixed
+    sparsity patterns): the stacked index arrays are built on the first call and kept while
+    the blocks' index arrays are the same memory; later calls only concatenate the values.
+    The blocks' index arrays are never written to (scipy's arithmetic returns new matrices)."""
+
+    def __init__(self, extra: int = 0):
+        self.extra = int(extra)
+        self._sources: list[np.ndarray] = []     # the blocks' index arrays, held alive
+        self._structure: tuple[np.ndarray, np.ndarray, int] | None = None
+
+    def __call__(self, blocks: list[sp.spmatrix]) -> sp.csr_matrix:
+        mats = [sp.csr_matrix(K) for K in blocks]
+        sources = [a for K in mats for a in (K.indices, K.indptr)]
+        if self._structure is None or len(sources) != len(self._sources) or any(
+                a.ctypes.data != b.ctypes.data or a.shape != b.shape or a.dtype != b.dtype
+                for a, b in zip(sources, self._sources)):
+            K = stack_diagonal(mats, self.extra)
+            self._sources, self._structure = sources, (K.indices, K.indptr, K.shape[0])
+            return K
+        indices, indptr, n = self._structure
+        return sp.csr_matrix((np.concatenate([K.data for K in mats]), indices, indptr), shape=(n, n))
 
 
 class System:
@@ -62,6 +101,11 @@ class System:
         #: the contact-onset limit of a solve's first Newton step
         self.onset = OnsetLimit(self.contact, lambda: bool(self.floating.bodies), policy)
         self._K: sp.csr_matrix | None = None
+        self._stack = DiagonalStack(self.contact.n_extra)
+        #: the bodies' stacked tangent and the body unknowns it was assembled at: it depends
+        #: on nothing else (not the load factor, not the frozen stress), so an assembly at the
+        #: same unknowns (a new outer pass from where the last one ended) reuses it
+        self._bodies_tangent: tuple[np.ndarray, sp.csr_matrix] | None = None
 
     @property
     def items(self) -> list:
@@ -104,25 +148,28 @@ class System:
         and if asked the tangent (CSR, N/m): the bodies' blocks on the diagonal, the contact
         couplings off it, plus the floating bodies' shift (tangent only)."""
         reuse = self.linear and self._K is not None
+        at = u[:self.offsets[-1]]
+        kept = self._bodies_tangent
+        same = tangent and not reuse and kept is not None and np.array_equal(kept[0], at)
         r = np.zeros(self.n_dofs)
-        parts = [item.add(u, t, r, tangent and not reuse) for item in self.body_items]
+        parts = [item.add(u, t, r, tangent and not reuse and not same) for item in self.body_items]
         couplings = self.contact.add(u, r, tangent) if self.contact else None
         if not tangent:
             return r, None
         if reuse:
             return r, self._K
-        K = self._stack([p for p in parts if isinstance(p, Block)])
+        if same:
+            K = kept[1]
+        else:
+            K = self._stack([p.K for p in parts if isinstance(p, Block)])
+            self._bodies_tangent = (at.copy(), K)
+            self.floating.detect([p.K for p in parts])
         if self.linear:
             self._K = K
         if couplings is not None:
-            self.floating.detect([p.K for p in parts])
-            K = K + couplings.tocsr()
+            K = add_couplings(K, couplings)
             K = self.floating.shifted(K, t, float(np.linalg.norm(r)))
         return r, K
-
-    def _stack(self, blocks: list[Block]) -> sp.csr_matrix:
-        """The bodies' blocks on the diagonal, a zero block on the contact set's unknowns."""
-        return stack_diagonal([b.K for b in blocks], self.contact.n_extra)
 
     def continuous_residual(self, u: np.ndarray, t: float) -> tuple[np.ndarray, int]:
         """The residual at ``u`` with every master hit on the continuous surface, in the
