@@ -12,7 +12,7 @@ import scipy.sparse as sp
 
 from tests.support import elasticity_fixture as fx
 from cgfem.solve.krylov import AMGPreconditioner, krylov_solve
-from cgfem.solve.linear import rigid_body_modes
+from cgfem.solve.linear import rigid_body_modes, smoothed_aggregation, v_cycle
 from cgfem.solve.policy import SolverPolicy
 from cgfem.solve.solves import DIRECT, KRYLOV, LinearSolves
 
@@ -169,3 +169,19 @@ def test_preconditioners_of_the_same_matrix_are_bitwise_equal(symmetric):
     np.random.seed(7)
     AMGPreconditioner(K, B, symmetric)
     assert np.array_equal(np.random.rand(3), expected)
+
+
+@pytest.mark.parametrize("symmetric", [True, False])
+def test_one_v_cycle_is_pyamgs_solve_of_one_cycle_bit_for_bit(symmetric):
+    """:func:`~cgfem.solve.linear.v_cycle` (without pyamg's residual norms) returns what
+    ``ml.solve(b, maxiter=1, cycle="V")`` returns, to the last bit, for the hierarchies the
+    project builds (nodal blocks, rigid-body modes, symmetric or not) and for one of a single
+    level."""
+    K, b, B = two_bodies(symmetric)
+    ml = AMGPreconditioner(K, B, symmetric)._ml
+    r = np.random.default_rng(5).standard_normal(K.shape[0])
+    for rhs in (r, b):
+        assert np.array_equal(v_cycle(ml, rhs), ml.solve(rhs, maxiter=1, cycle="V", tol=1e-300))
+    single = smoothed_aggregation(sp.csr_matrix(fx.stiffness(2, 2, 2) + sp.eye(81)), max_levels=1)
+    assert len(single.levels) == 1
+    assert np.array_equal(v_cycle(single, r[:81]), single.solve(r[:81], maxiter=1, tol=1e-300))

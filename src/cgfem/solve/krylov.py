@@ -24,7 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from cgfem.solve.linear import LinearSolverError, smoothed_aggregation
+from cgfem.solve.linear import LinearSolverError, smoothed_aggregation, v_cycle
 
 #: inner iterations of one GMRES cycle
 RESTART = 50
@@ -78,7 +78,7 @@ class AMGPreconditioner:
 
     def __call__(self, r: np.ndarray) -> np.ndarray:
         s = self._s
-        return s * self._ml.solve(s * r, maxiter=1, cycle="V", tol=1e-300)
+        return s * v_cycle(self._ml, s * r)
 
     def operator(self) -> spla.LinearOperator:
         return spla.LinearOperator((self.n, self.n), matvec=self)

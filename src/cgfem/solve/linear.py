@@ -63,6 +63,34 @@ def smoothed_aggregation(A: sp.spmatrix, **kwargs: Any):
         np.random.set_state(state)
 
 
+def v_cycle(ml, b: np.ndarray) -> np.ndarray:
+    """One V-cycle of the multigrid hierarchy ``ml`` on ``A x = b`` (n,) from ``x = 0``: the
+    ``x`` of ``ml.solve(b, maxiter=1, cycle="V")``, operation for operation, without the two
+    residual norms that call computes around its cycle (two products with the finest matrix:
+    a third of the cycle's work on the finest level, wasted in a preconditioner)."""
+    levels, b = ml.levels, np.ravel(b)
+    if len(levels) == 1:
+        return np.asarray(ml.coarse_solver(levels[0].A, b))
+    x = np.zeros_like(b)
+    _descend(ml, 0, x, b)
+    return x
+
+
+def _descend(ml, lvl: int, x: np.ndarray, b: np.ndarray) -> None:
+    """The V-cycle from level ``lvl`` down: pre-smoothing of ``x`` in place, the coarse
+    correction (solved on the coarsest level), post-smoothing."""
+    level = ml.levels[lvl]
+    level.presmoother(level.A, x, b)
+    coarse_b = level.R @ (b - level.A @ x)
+    coarse_x = np.zeros_like(coarse_b)
+    if lvl == len(ml.levels) - 2:
+        coarse_x[:] = ml.coarse_solver(ml.levels[-1].A, coarse_b)
+    else:
+        _descend(ml, lvl + 1, coarse_x, coarse_b)
+    x += level.P @ coarse_x
+    level.postsmoother(level.A, x, b)
+
+
 class LinearSolverError(RuntimeError):
     """The system could not be solved: singular matrix, no convergence, NaN or inf."""
 
@@ -276,7 +304,9 @@ class _AMG(LinearSolver):
             As = As.tobsr(blocksize=(3, 3))
         kwargs: dict[str, Any] = {"improve_candidates": None} if B is not None else {}
         self._ml = smoothed_aggregation(As, B=B, symmetry="hermitian" if symmetric else "nonsymmetric", **kwargs)
-        self._As, self._M = self._ml.levels[0].A, self._ml.aspreconditioner()  # one copy of A
+        ml = self._ml
+        self._As = ml.levels[0].A      # one copy of A
+        self._M = spla.LinearOperator((self.n, self.n), matvec=lambda r: v_cycle(ml, r), dtype=np.float64)
         self.info.update(krylov="cg" if symmetric else "gmres", levels=len(self._ml.levels),
                          operator_complexity=float(self._ml.operator_complexity()))
 

@@ -38,7 +38,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from cgfem.solve.linear import LinearSolver, LinearSolverError, build, smoothed_aggregation
+from cgfem.solve.linear import LinearSolver, LinearSolverError, build, smoothed_aggregation, v_cycle
 
 #: entries of a row of ``C = M^-1 G`` below this fraction of its largest are left out of the
 #: preconditioner (the choice is measured in docs/performance.md)
@@ -141,7 +141,7 @@ class ReducedSaddleSolver(LinearSolver):
             Ps = Ps.tobsr(blocksize=(3, 3))
         kwargs = {"improve_candidates": None} if B is not None else {}
         ml = smoothed_aggregation(Ps, B=B, symmetry="hermitian" if symmetric else "nonsymmetric", **kwargs)
-        self._precondition = lambda r: s * ml.solve(s * r, tol=1e-8, maxiter=1, cycle="V")
+        self._precondition = lambda r: s * v_cycle(ml, s * r)
 
     def _fit_rows(self, c: FitConstraint, rows: np.ndarray) -> sp.csr_matrix:
         """:meth:`FitConstraint.truncated_rows` of the patch's controls among its ``Z`` rows
