@@ -3,6 +3,7 @@ Newton attempts of a pass (modified Newton first, then full Newton from its best
 
 from __future__ import annotations
 
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -326,3 +327,36 @@ def test_passes_but_the_last_stop_newton_early_only_on_the_krylov_path(monkeypat
                                 SolverOptions(outer_tol=1e-6, outer_passes=10), lambda m: None)
     assert isinstance(out, outer.Increment) and out.outer_converged
     assert loose == expected
+
+
+@pytest.mark.parametrize("factorizes, expected", [(False, [1.0, 1.0e4, 1.0e4, 1.0]),
+                                                  (True, [1.0, 1.0e4, 1.0e4, 1.0e4, 1.0])])
+def test_the_last_passes_are_measured_against_the_forces_from_their_start_on_the_krylov_path(
+        monkeypatch, factorizes, expected):
+    """The increment's first residual (1e4, a penalty force) is no force in play (1.0). On the
+    Krylov path the forces become Newton's reference as soon as the stress changed by at most
+    ``100 outer_tol`` (after pass 3), so the pass whose stress settles (pass 4) is tight and
+    ends the increment; on the direct path they are measured only once the stress settled,
+    and a fifth pass is tight."""
+    import cgfem.solve.outer as outer
+    from cgfem.case.model import SolverOptions
+
+    given = []
+
+    def newton(assemble, u0, solves, *, tol, reference, **kw):
+        first = 1.0e4 if not given else 1.0e-5
+        given.append(reference)
+        ref = max(reference, first)
+        return NewtonResult(u0, True, [first, 0.5 * tol * ref], ref, "converged")
+    monkeypatch.setattr(outer, "newton", newton)
+
+    system = _Forces(_Contact([""] * 10), 1.0)
+    system.policy = replace(system.policy, acceleration="none")
+    # relative changes of 1, 1e-2, 1e-5, 1e-8, then none
+    scales = iter([1.0, 1.01, 1.01001, 1.0100100001, 1.0100100001])
+    system.recover = lambda u: [np.full((2, 3, 3), next(scales))]
+    solves = SimpleNamespace(frozen=False, factorizes=factorizes)
+    out = outer.solve_increment(system, solves, np.zeros(3), [None], 1.0,
+                                SolverOptions(newton_tol=1e-9, outer_tol=1e-6, outer_passes=10), lambda m: None)
+    assert isinstance(out, outer.Increment) and out.outer_converged
+    assert given == expected
