@@ -36,6 +36,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from cgfem.solve._smoother_kernels import block_gauss_seidel
+
 BACKENDS = ("superlu", "pyamg", "pardiso")
 DIRECT_CHECK = 1e-8  #: relative residual a direct solve must reach
 MAX_ITERATIONS = 1000  #: bound on the Krylov iterations of one pyamg solve
@@ -46,21 +48,55 @@ GMRES_RESTART = 50
 AMG_SEED = 2026
 
 
-def smoothed_aggregation(A: sp.spmatrix, **kwargs: Any):
+def smoothed_aggregation(A: sp.spmatrix, pre: str = "symmetric", post: str = "symmetric", **kwargs: Any):
     """pyamg's smoothed-aggregation hierarchy of ``A`` (``kwargs`` as
-    ``pyamg.smoothed_aggregation_solver``'s), built with numpy's global generator seeded at
-    :data:`AMG_SEED` and restored afterwards. pyamg's spectral-radius estimates (the
-    prolongation smoother's weight on every level) start from a random vector of that
-    generator: without the seed two set-ups of the same matrix differ at round-off, and so
-    do the Krylov iterates and a run's contact decisions after them."""
+    ``pyamg.smoothed_aggregation_solver``'s) with block Gauss-Seidel smoothers, ``pre`` and
+    ``post`` sweeps (:func:`block_sweeps`; pyamg's default is symmetric on both sides), built
+    with numpy's global generator seeded at :data:`AMG_SEED` and restored afterwards. pyamg's
+    spectral-radius estimates (the prolongation smoother's weight on every level) start from a
+    random vector of that generator: without the seed two set-ups of the same matrix differ at
+    round-off, and so do the Krylov iterates and a run's contact decisions after them."""
     import pyamg
 
     state = np.random.get_state()
     np.random.seed(AMG_SEED)
     try:
-        return pyamg.smoothed_aggregation_solver(A, **kwargs)
+        ml = pyamg.smoothed_aggregation_solver(A, presmoother=("block_gauss_seidel", {"sweep": pre}),
+                                               postsmoother=("block_gauss_seidel", {"sweep": post}), **kwargs)
     finally:
         np.random.set_state(state)
+    block_sweeps(ml, pre, post)
+    return ml
+
+
+def block_sweeps(ml, pre: str, post: str) -> None:
+    """Make the smoothers of every level of the hierarchy ``ml`` whose matrix is in BSR form
+    block Gauss-Seidel sweeps (:func:`~cgfem.solve._smoother_kernels.block_gauss_seidel`):
+    ``pre`` before the coarse correction, ``post`` after it, each ``"forward"``,
+    ``"backward"`` or ``"symmetric"`` (forward, then backward). pyamg's own block Gauss-Seidel
+    does the same arithmetic (a forward sweep gives the same bits) at about half the speed on
+    3x3 blocks. The diagonal blocks are inverted once per level, by pyamg's
+    ``get_block_diag`` as its smoother does."""
+    from pyamg.util.utils import get_block_diag
+
+    directions = {"forward": (True,), "backward": (False,), "symmetric": (True, False)}
+    for level in ml.levels[:-1]:
+        A = level.A
+        if not sp.issparse(A) or A.format != "bsr" or A.blocksize[0] != A.blocksize[1]:
+            continue
+        dinv = np.ascontiguousarray(get_block_diag(A, blocksize=A.blocksize[0], inv_flag=True))
+        level.presmoother = _sweeper(A, dinv, directions[pre])
+        level.postsmoother = _sweeper(A, dinv, directions[post])
+
+
+def _sweeper(A: sp.spmatrix, dinv: np.ndarray, directions: tuple[bool, ...]) -> Callable:
+    """A smoother ``(A, x, b)`` in pyamg's form: the sweeps of ``directions`` on ``A``."""
+    indptr, indices, blocks = A.indptr, A.indices, A.data
+
+    def smooth(_A, x: np.ndarray, b: np.ndarray) -> None:
+        for forward in directions:
+            block_gauss_seidel(indptr, indices, blocks, dinv, x, b, forward)
+    return smooth
 
 
 def v_cycle(ml, b: np.ndarray) -> np.ndarray:
