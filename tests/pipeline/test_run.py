@@ -172,6 +172,28 @@ def test_memory_estimate_follows_the_solve_path():
     assert small[1] < 100_000 and not small[2]
 
 
+def test_memory_estimate_without_contact_lets_the_bent_half_torus_run_order_2_at_level_3():
+    """Without contact the Krylov path's factor is ``KRYLOV_MEMORY_NO_CONTACT``: the bent half
+    torus at order 2, level 3 (about 750k unknowns; measured peak 14.7 GiB) is estimated
+    below 23 GiB; the same two links with and without their contact pair differ by the
+    factor alone."""
+    from dataclasses import replace
+
+    from cgfem.case import load_case
+    from cgfem.run import KRYLOV_MEMORY, KRYLOV_MEMORY_NO_CONTACT, estimate_memory
+    bent = load_case(CASES / "bent_half_torus.yaml")
+    assert not bent.contact
+    need, dofs, krylov = estimate_memory(bent, 3, {"link": (4.93e-6, 2.13e-3)}, 2)
+    assert krylov and dofs > 600_000 and 14.7 * 2**30 < need < 23 * 2**30
+    chain = load_case(CASES / "chain2_steel.yaml")
+    measures = {b.name: (4.93e-6, 2.13e-3) for b in chain.bodies}
+    direct = estimate_memory(chain, 3, measures, 2, krylov_min_dofs=10**9)[0]
+    assert estimate_memory(chain, 3, measures, 2)[0] == pytest.approx(KRYLOV_MEMORY[2] * direct, rel=1e-9)
+    alone = estimate_memory(replace(chain, contact=()), 3, measures, 2)[0]
+    assert alone == pytest.approx(KRYLOV_MEMORY_NO_CONTACT[2] * direct, rel=1e-9)
+    assert KRYLOV_MEMORY_NO_CONTACT[2] < KRYLOV_MEMORY[2]
+
+
 def test_run_rejects_case_errors_like_check(tmp_path, capsys):
     bad = LINK.replace("outer_tol: 1.0e-6", "outer_tol: 1.0e-6, ghost_penalty: -1")
     code = main(["run", _write(tmp_path, bad), "--level", "0", "--surface", "facets", "--out", str(tmp_path)])
