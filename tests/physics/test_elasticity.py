@@ -45,7 +45,10 @@ def test_pattern_positions_assemble_like_coo(sphere_space):
     rows = np.broadcast_to(dofs[:, :, None], ke.shape).ravel()
     cols = np.broadcast_to(dofs[:, None, :], ke.shape).ravel()
     reference = sp.coo_matrix((ke.ravel(), (rows, cols)), shape=(space.n_dofs,) * 2).tocsr()
-    assert abs(pattern.matrix(data) - reference).max() < 1e-13
+    K = pattern.matrix(data)
+    assert abs(K - reference).max() < 1e-13
+    # the matrix shares the pattern's index arrays: scipy does not copy them for every matrix
+    assert np.shares_memory(K.indices, pattern.indices) and np.shares_memory(K.indptr, pattern.indptr)
     # colours: no two elements of one colour share a node
     for elements in pattern.colours:
         nodes = space.connectivity[elements].ravel()

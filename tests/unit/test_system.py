@@ -27,20 +27,32 @@ def test_stacked_blocks_are_scipys_block_diagonal_array_for_array(extra):
 
 
 def test_kept_structure_stacks_new_values_and_rebuilds_on_a_new_structure():
-    """While the blocks' index arrays are the same memory only the values are new: the result
-    equals :func:`stack_diagonal` of the new blocks; blocks of another structure rebuild it."""
+    """While the blocks' index arrays are the same memory only the values are new: the stacked
+    index arrays are the kept ones, and the result is :func:`stack_diagonal`'s of the new
+    blocks; blocks of another structure, and then the first again, rebuild it."""
     rng = np.random.default_rng(4)
     base = [sp.random(n, n, density=0.4, format="csr", random_state=n) + sp.eye(n, format="csr") for n in (6, 4)]
     stack = DiagonalStack(extra=3)
 
     def revalued(blocks):
         return [sp.csr_matrix((rng.standard_normal(K.nnz), K.indices, K.indptr), shape=K.shape) for K in blocks]
-    first = stack(base)
-    for blocks in (revalued(base), revalued(base), [sp.eye(4, format="csr"), sp.eye(6, format="csr")]):
-        found, expected = stack(blocks), stack_diagonal(blocks, 3)
+
+    def check(found, blocks):
+        expected = stack_diagonal(blocks, 3)
         for name in ("indptr", "indices", "data"):
             assert np.array_equal(getattr(found, name), getattr(expected, name)), name
-    assert stack(revalued(base)).indices is not first.indices   # the last call rebuilt
+    first = stack(base)
+    check(first, base)
+    kept = revalued(base)
+    found = stack(kept)
+    check(found, kept)
+    assert np.shares_memory(found.indices, first.indices) and np.shares_memory(found.indptr, first.indptr)
+    other = [sp.eye(4, format="csr"), sp.eye(6, format="csr")]
+    found = stack(other)
+    check(found, other)
+    assert not np.shares_memory(found.indices, first.indices)
+    again = revalued(base)
+    check(stack(again), again)
 
 
 def test_couplings_are_added_entry_for_entry_as_scipy_adds_them():
@@ -61,3 +73,8 @@ def test_couplings_are_added_entry_for_entry_as_scipy_adds_them():
     assert expected.nnz < K.nnz + C.nnz
     for name in ("indptr", "indices", "data"):
         assert np.array_equal(getattr(found, name), getattr(expected, name)), name
+    # a tangent whose rows are not sorted takes scipy's own sum: the same matrix
+    unsorted = sp.csr_matrix((K.data[::-1].copy(), K.indices.copy(), K.indptr.copy()), shape=K.shape)
+    unsorted.indices[K.indptr[0]:K.indptr[1]] = unsorted.indices[K.indptr[0]:K.indptr[1]][::-1]
+    assert not unsorted.has_sorted_indices
+    assert np.array_equal(add_couplings(unsorted, C).toarray(), (unsorted + C.tocsr()).toarray())

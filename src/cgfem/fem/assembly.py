@@ -81,7 +81,13 @@ def build_pattern(space: Space, extra_pairs: np.ndarray | None = None) -> Patter
     nd = space.element.n_dofs
     scatter = np.empty((space.n_elements, nd * nd), np.int32 if nnz < 2**31 - 1 else np.int64)
     indptr, indices = dof_pattern(node_ptr, nbr, conn, scatter)
-    # scipy converts the index arrays to the smallest type that holds them on every matrix():
-    # converted once here instead (calloc'ed zeros: the values cost no memory traffic)
-    shaped = sp.csr_matrix((np.zeros(nnz), indices, indptr), shape=(space.n_dofs, space.n_dofs))
-    return Pattern(space.n_dofs, shaped.indptr, shaped.indices, scatter, colours(space))
+    # scipy converts the index arrays to the type of index_type on every matrix(): once here
+    index = index_type(space.n_dofs, nnz)
+    return Pattern(space.n_dofs, indptr.astype(index), indices.astype(index), scatter, colours(space))
+
+
+def index_type(n: int, nnz: int) -> type:
+    """The index type scipy gives a CSR matrix of ``n`` rows (and columns) and ``nnz`` entries:
+    int32 while both fit in it, else int64. Index arrays of that type are shared by the
+    matrices built on them, not copied."""
+    return np.int32 if max(n, nnz) < 2**31 else np.int64

@@ -15,6 +15,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from cgfem.contact.assembly import ContactSet
+from cgfem.fem.assembly import index_type
 from cgfem.solve.floating import STRETCH_FLOOR_H, FloatingBodies, rotation_stretch
 from cgfem.solve.items import Block, BodyItem
 from cgfem.solve.linear import rigid_body_modes
@@ -33,7 +34,7 @@ def stack_diagonal(blocks: list[sp.spmatrix], extra: int = 0) -> sp.csr_matrix:
     starts = np.cumsum([0] + [K.shape[0] for K in mats])
     nnz = np.cumsum([0] + [K.nnz for K in mats])
     n = int(starts[-1]) + extra
-    index = np.int32 if max(n, int(nnz[-1])) < 2**31 else np.int64
+    index = index_type(n, int(nnz[-1]))
     data = np.concatenate([K.data for K in mats])
     indices = np.concatenate([K.indices.astype(index) + index(s) for K, s in zip(mats, starts)])
     indptr = np.concatenate([np.zeros(1, index)] + [K.indptr[1:].astype(index) + index(z) for K, z in zip(mats, nnz)]
@@ -100,11 +101,11 @@ class System:
             self.floating.bodies = []
         #: the contact-onset limit of a solve's first Newton step
         self.onset = OnsetLimit(self.contact, lambda: bool(self.floating.bodies), policy)
-        self._K: sp.csr_matrix | None = None
         self._stack = DiagonalStack(self.contact.n_extra)
         #: the bodies' stacked tangent and the body unknowns it was assembled at: it depends
         #: on nothing else (not the load factor, not the frozen stress), so an assembly at the
-        #: same unknowns (a new outer pass from where the last one ended) reuses it
+        #: same unknowns (a new outer pass from where the last one ended), or at any unknowns
+        #: of a linear system, reuses it
         self._bodies_tangent: tuple[np.ndarray, sp.csr_matrix] | None = None
 
     @property
@@ -147,25 +148,20 @@ class System:
         """The residual (n_dofs,) (N) at ``u`` and load factor ``t``, the sum of every item's,
         and if asked the tangent (CSR, N/m): the bodies' blocks on the diagonal, the contact
         couplings off it, plus the floating bodies' shift (tangent only)."""
-        reuse = self.linear and self._K is not None
         at = u[:self.offsets[-1]]
         kept = self._bodies_tangent
-        same = tangent and not reuse and kept is not None and np.array_equal(kept[0], at)
+        reuse = tangent and kept is not None and (self.linear or np.array_equal(kept[0], at))
         r = np.zeros(self.n_dofs)
-        parts = [item.add(u, t, r, tangent and not reuse and not same) for item in self.body_items]
+        parts = [item.add(u, t, r, tangent and not reuse) for item in self.body_items]
         couplings = self.contact.add(u, r, tangent) if self.contact else None
         if not tangent:
             return r, None
         if reuse:
-            return r, self._K
-        if same:
             K = kept[1]
         else:
             K = self._stack([p.K for p in parts if isinstance(p, Block)])
             self._bodies_tangent = (at.copy(), K)
             self.floating.detect([p.K for p in parts])
-        if self.linear:
-            self._K = K
         if couplings is not None:
             K = add_couplings(K, couplings)
             K = self.floating.shifted(K, t, float(np.linalg.norm(r)))
