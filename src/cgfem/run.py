@@ -101,13 +101,12 @@ def brep_measures(solid) -> tuple[float, float]:
 
 
 def estimate_memory(case: Case, level: int, measures: dict[str, tuple[float, float]], order: int = 1,
-                    surface: str = "nurbs_fe", krylov_min_dofs: int = DEFAULT_POLICY.krylov_min_dofs
-                    ) -> tuple[int, int, bool]:
+                    krylov_min_dofs: int = DEFAULT_POLICY.krylov_min_dofs) -> tuple[int, int, bool]:
     """Estimated bytes and DOFs of ``case`` at ``level`` with elements of ``order`` from the
     B-rep volume and area of every body (``measures``): inside elements ~ V / h^3, cut
     elements ~ 2 A / h^2, ``order^3`` nodes per element; and whether the Newton systems take
-    the Krylov path (``linear: auto``, at least ``krylov_min_dofs`` unknowns, no fitted
-    surface, whose saddle point is factorized: :mod:`cgfem.solve.solves`), whose estimate is
+    the Krylov path (``linear: auto``, at least ``krylov_min_dofs`` unknowns:
+    :mod:`cgfem.solve.solves`), whose estimate is
     :data:`KRYLOV_MEMORY` (:data:`KRYLOV_MEMORY_NO_CONTACT` without contact) times the
     factorization's."""
     total, dofs = 0.0, 0
@@ -117,19 +116,19 @@ def estimate_memory(case: Case, level: int, measures: dict[str, tuple[float, flo
         inside, cut = v / h**3, 2.0 * a / h**2
         total += ORDER_MEMORY[order] * (BYTES_PER_ELEMENT * inside + BYTES_PER_CUT_ELEMENT * cut)
         dofs += int(3 * order**3 * (inside + cut))
-    krylov = solve_path(case.solver.linear, surface_definition(surface).fitted, dofs, krylov_min_dofs) == KRYLOV
+    krylov = solve_path(case.solver.linear, dofs, krylov_min_dofs) == KRYLOV
     if krylov:
         total *= (KRYLOV_MEMORY if case.contact else KRYLOV_MEMORY_NO_CONTACT)[order]
     return int(total), dofs, krylov
 
 
 def check_memory(case: Case, level: int, measures: dict[str, tuple[float, float]],
-                 total: int | None = None, order: int = 1, surface: str = "nurbs_fe",
+                 total: int | None = None, order: int = 1,
                  krylov_min_dofs: int = DEFAULT_POLICY.krylov_min_dofs) -> None:
     """Refuse a level whose estimated memory (:func:`estimate_memory`, an upper bound;
     docs/performance.md) exceeds the machine's physical memory ``total`` (default :func:`machine_memory`). Not the
     memory free at the moment: in the pipeline other runs hold some of it while they last."""
-    need, dofs, krylov = estimate_memory(case, level, measures, order, surface, krylov_min_dofs)
+    need, dofs, krylov = estimate_memory(case, level, measures, order, krylov_min_dofs)
     have = machine_memory() if total is None else total
     if need > have:
         path = "Krylov path" if krylov else "direct solver"
@@ -189,7 +188,7 @@ def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None
                                                    f"(--surface {' or '.join(NURBS_DEFINITIONS)}), not {surface}")
     solids = {b.name: build_solid(b.geometry) for b in case.bodies}
     brep = {name: brep_measures(solid) for name, solid in solids.items()}
-    check_memory(case, level, brep, order=order, surface=surface, krylov_min_dofs=policy.krylov_min_dofs)
+    check_memory(case, level, brep, order=order, krylov_min_dofs=policy.krylov_min_dofs)
     finite = case.kinematics == "finite"
     models, measures = [], {}
     for body in case.bodies:

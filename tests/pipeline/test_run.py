@@ -152,7 +152,8 @@ def test_memory_guard_compares_with_the_machine_not_the_free_memory():
 
 def test_memory_estimate_follows_the_solve_path():
     """Systems that take the Krylov path (``linear: auto``, at least ``krylov_min_dofs``
-    unknowns, no fitted surface) are estimated without a factorization's fill:
+    unknowns, whatever the surface definition: ``nurbs_fit``'s saddle point is reduced to
+    the bodies' dofs there) are estimated without a factorization's fill:
     ``KRYLOV_MEMORY`` times the direct path's estimate, per element order; chain2_steel at
     level 4 (1.2M unknowns, 41.7 GiB direct) then fits 23 GiB."""
     from cgfem.case import load_case
@@ -160,15 +161,13 @@ def test_memory_estimate_follows_the_solve_path():
     case = load_case(CASES / "chain2_steel.yaml")
     measures = {b.name: (4.93e-6, 2.13e-3) for b in case.bodies}     # a half torus link: V, A
     for order in (1, 2):
-        direct, dofs, krylov = estimate_memory(case, 4, measures, order, "nurbs_fe", krylov_min_dofs=10**9)
+        direct, dofs, krylov = estimate_memory(case, 4, measures, order, krylov_min_dofs=10**9)
         assert not krylov
-        iterative, same, krylov = estimate_memory(case, 4, measures, order, "nurbs_fe")
+        iterative, same, krylov = estimate_memory(case, 4, measures, order)
         assert krylov and same == dofs >= 100_000
         assert iterative == pytest.approx(KRYLOV_MEMORY[order] * direct, rel=1e-9)
-        # nurbs_fit's saddle point is factorized: the direct estimate
-        assert estimate_memory(case, 4, measures, order, "nurbs_fit") == (direct, dofs, False)
     # a size below the Krylov threshold is the direct path's
-    small = estimate_memory(case, 0, measures, 1, "nurbs_fe")
+    small = estimate_memory(case, 0, measures, 1)
     assert small[1] < 100_000 and not small[2]
 
 

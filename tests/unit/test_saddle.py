@@ -115,7 +115,7 @@ def test_truncated_fit_rows_make_a_close_preconditioner(symmetric):
 
     def iterations(drop):
         solver = saddle.ReducedSaddleSolver(A, n_u, [c], symmetric, None, preconditioner="superlu",
-                                            drop=drop).bind(sp.csr_matrix(A))
+                                            drop=drop)
         x = solver.solve(b)
         assert np.linalg.norm(A @ x - b) <= 1e-8 * np.linalg.norm(b)
         return solver.info["iterations"][-1]
@@ -152,3 +152,28 @@ def test_rows_of_the_fit_are_computed_once_per_control():
     assert solved == [3, 2]
     np.testing.assert_allclose(more[[1, 3, 7, 8, 20]], dense[[1, 3, 7, 8, 20]], rtol=0, atol=1e-14)
     assert c.truncated_rows(np.zeros(0, np.int64), DROP).nnz == 0
+
+
+@pytest.mark.parametrize("symmetric", [True, False])
+def test_a_kept_preconditioner_solves_a_later_matrix_to_the_asked_residual(symmetric):
+    """The Krylov path keeps a saddle point's preconditioner across Newton iterations:
+    ``krylov`` on another matrix with the same unknowns (the contact tangent changed by 20 %,
+    the bodies' block by 5 %) keeps the preconditioner, solves that matrix's system, not the
+    first one's, to the relative residual asked for, and binds each matrix once."""
+    A, b, n_u, c = _system(symmetric)
+    solver = reduced_saddle(A, n_u, [c], symmetric)
+    z = c.z
+    D = sp.lil_matrix(A.shape)
+    D[:n_u, :n_u] = 0.05 * A[:n_u, :n_u]
+    D[z[:, None], z] = 0.2 * A[z][:, z]
+    A2 = sp.csr_matrix(A + D)
+    x, iterations, residual, reached = solver.krylov(A2, b, 1e-9, 1000)
+    assert reached and residual <= 1e-9 and 0 < iterations < 1000
+    assert np.linalg.norm(A2 @ x - b) <= 1e-9 * np.linalg.norm(b)
+    assert np.linalg.norm(A @ x - b) > 1e-3 * np.linalg.norm(b)
+    precondition, K = solver._precondition, solver.K
+    solver.krylov(A2, b, 1e-6, 1000)
+    assert solver._precondition is precondition and solver.K is K
+    # too few iterations: reported, not raised
+    _, iterations, residual, reached = solver.krylov(A2, b, 1e-12, 2)
+    assert not reached and iterations <= 2 and residual > 1e-12

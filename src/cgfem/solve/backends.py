@@ -1,7 +1,8 @@
 """Which linear solver a system gets, and the one call that sets it up.
 
 This module chooses between the backends of :mod:`cgfem.solve.linear` and the reduced
-saddle-point solver of :mod:`cgfem.solve.saddle`, and is the only one that imports both.
+saddle-point solver of :mod:`cgfem.solve.saddle` for the direct path (the Krylov path's
+preconditioners are :mod:`cgfem.solve.solves`'); those two modules do not import each other.
 
 ``auto``, from ``benchmarks/bench_solvers.py`` (clamped H8 cube; 2 cores shared with other
 jobs, so times vary up to 2x between runs). Seconds for setup + first solve / a re-solve:

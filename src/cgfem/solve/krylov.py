@@ -81,6 +81,12 @@ class AMGPreconditioner:
     def operator(self) -> spla.LinearOperator:
         return spla.LinearOperator((self.n, self.n), matvec=self)
 
+    def krylov(self, K: sp.spmatrix, b: np.ndarray, rtol: float, max_iterations: int,
+               x0: np.ndarray | None = None) -> tuple[np.ndarray, int, float, bool]:
+        """A solve of the Krylov path: :func:`krylov_solve` of ``K x = b`` with this
+        preconditioner."""
+        return krylov_solve(K, b, self, rtol, max_iterations, self.symmetric, x0)
+
 
 def krylov_solve(K: sp.spmatrix, b: np.ndarray, M: AMGPreconditioner, rtol: float, max_iterations: int,
                  symmetric: bool, x0: np.ndarray | None = None) -> tuple[np.ndarray, int, float, bool]:

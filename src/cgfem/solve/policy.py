@@ -74,9 +74,9 @@ class SolverPolicy:
 
     Linear solves (:class:`~cgfem.solve.solves.LinearSolves`)
     ----------------------------------------------------------
-    krylov_min_dofs : ``linear: auto`` solves a system of at least this many unknowns that is
-        not a saddle point by the preconditioned Krylov path, smaller ones by the direct path
-        (:mod:`cgfem.solve.backends`).
+    krylov_min_dofs : ``linear: auto`` solves a system of at least this many unknowns by the
+        preconditioned Krylov path (a saddle point on its bodies' dofs), smaller ones by the
+        direct path (:mod:`cgfem.solve.backends`).
     krylov_refresh : a Krylov solve that needs more than this many iterations with a kept
         preconditioner is repeated with a preconditioner of the current matrix.
     krylov_max_iterations : iterations after which a Krylov solve with a fresh

@@ -40,6 +40,9 @@ import scipy.sparse.linalg as spla
 
 from cgfem.solve.linear import LinearSolver, LinearSolverError, build, smoothed_aggregation, v_cycle
 
+#: inner iterations of one GMRES cycle
+RESTART = 50
+
 #: entries of a row of ``C = M^-1 G`` below this fraction of its largest are left out of the
 #: preconditioner (the choice is measured in docs/performance.md)
 DROP = 6e-2
@@ -104,13 +107,13 @@ class ReducedSaddleSolver(LinearSolver):
         super().__init__(A.shape[0])
         if preconditioner != "pyamg":
             self.backend = f"saddle-{preconditioner}"
+        #: the matrix whose system the operator is of (:meth:`krylov`)
+        self._bound = A
         A = sp.csr_matrix(A)
         self.n_u, self.constraints, self.symmetric = n_u, constraints, symmetric
         self.rtol, self.max_iterations, self.drop = rtol, max_iterations, drop
-        self.K = A[:n_u][:, :n_u].tocsr()
-        z = np.concatenate([c.z for c in constraints])
-        self._z = z
-        self.Kc = A[z][:, z].tocsr()                     # contact tangent on all fitted Z
+        self._z = np.concatenate([c.z for c in constraints])
+        self._bind(A)
         self._offsets = np.concatenate([[0], np.cumsum([c.z.size for c in constraints])])
         self._mu = np.concatenate([c.mu for c in constraints])
         self._s = np.concatenate([np.full(c.z.size, c.scale) for c in constraints])
@@ -136,7 +139,9 @@ class ReducedSaddleSolver(LinearSolver):
         B = None if near_null is None else near_null[:n_u] / s[:, None]
         # as for the bodies' own matrices (cgfem.solve.linear): nodal 3x3 blocks, and the
         # given near-null space taken as it is (improving it costs relaxation sweeps on all
-        # six modes on every level)
+        # six modes on every level). pyamg's symmetric sweeps on both sides, not the Krylov
+        # path's one forward and one backward (cgfem.solve.krylov), and every body's six
+        # modes: on planar at level 2 those took 1.6x the CG iterations in the same time
         if n_u % 3 == 0:
             Ps = Ps.tobsr(blocksize=(3, 3))
         kwargs = {"improve_candidates": None} if B is not None else {}
@@ -167,10 +172,26 @@ class ReducedSaddleSolver(LinearSolver):
         return np.concatenate([c.solve_M(y[a:b].reshape(-1, 3)).ravel()
                                for c, a, b in zip(self.constraints, self._offsets[:-1], self._offsets[1:])])
 
-    def _solve(self, b: np.ndarray, norm_b: float, rtol: float | None) -> tuple[np.ndarray, int, float]:
+    def _bind(self, A: sp.csr_matrix) -> None:
+        """The operator of the system of ``A`` (CSR, the whole saddle point): its bodies' block
+        ``K``, the contact tangent ``Kc`` on all fitted ``Z``, and its product."""
         n_u, z = self.n_u, self._z
-        target = self.rtol if rtol is None else max(self.rtol, rtol)
+        self.K = A[:n_u][:, :n_u].tocsr()
+        self.Kc = A[z][:, z].tocsr()
+        self._matvec = A.dot
+
+    def iterate(self, b: np.ndarray, rtol: float, max_iterations: int, x0: np.ndarray | None = None,
+                rounds: int = 4) -> tuple[np.ndarray, int, float]:
+        """Solve ``A x = b`` (n,) on the bodies' dofs (module docstring) from ``x0`` (its
+        bodies' part is used; zero if None) until the whole system's relative residual
+        ``|b - A x| / |b|`` is at most ``rtol`` or ``max_iterations`` Krylov iterations:
+        ``(x, iterations, residual)``. The reduced method runs at most ``rounds`` times, its own
+        test tightened each time while the whole residual is above ``rtol``."""
+        n_u, z = self.n_u, self._z
         mu, s = self._mu, self._s
+        norm_b = float(np.linalg.norm(b))
+        if norm_b == 0.0:
+            return np.zeros(self.n), 0, 0.0
         b_u, b_Z, b_mu = b[:n_u], b[z], b[mu]
         w = self._Minv(b_mu / s)                                    # M^-1 b_mu / s
         rhs = b_u + self._Ct(b_Z) - self._Ct(self.Kc @ w)
@@ -183,28 +204,54 @@ class ReducedSaddleSolver(LinearSolver):
         norm_rhs = float(np.linalg.norm(rhs))
         # the residual of the bodies' rows is the whole system's (Z and mu are exact given
         # u), measured against b: a stiff contact tangent makes rhs much larger than b
-        reduced = target * min(1.0, norm_b / norm_rhs) if norm_rhs > 0.0 else target
-        if norm_rhs == 0.0:
-            u = np.zeros(n_u)
-        elif self.symmetric and self.backend == "saddle-pyamg":
-            u, info = spla.cg(S, rhs, rtol=reduced, atol=0.0, maxiter=self.max_iterations, M=Pinv,
-                              callback=callback)
-        else:
-            u, info = spla.gmres(S, rhs, rtol=reduced, atol=0.0, restart=50, maxiter=self.max_iterations,
-                                 M=Pinv, callback=callback, callback_type="pr_norm")
-        Z = w + self._C(u)
-        mu_x = self._Minv(b_Z - self.Kc @ Z) / s
-        x = np.zeros(self.n)
-        x[:n_u], x[z], x[mu] = u, Z, mu_x
-        residual = float(np.linalg.norm(b - self._matvec(x))) / norm_b if norm_b > 0.0 else 0.0
-        if not np.isfinite(residual) or residual > max(10.0 * target, 1e-8):
-            raise LinearSolverError(f"{self.backend}: reached relative residual {residual:.2e} in {count[0]} "
-                                    f"Krylov iterations")
+        reduced = rtol * min(1.0, norm_b / norm_rhs) if norm_rhs > 0.0 else rtol
+        u = np.zeros(n_u) if x0 is None or norm_rhs == 0.0 else np.array(x0[:n_u], dtype=np.float64)
+        x, residual = np.zeros(self.n), np.inf
+        for _ in range(rounds):
+            left = max_iterations - count[0]
+            if norm_rhs > 0.0 and left <= 0:
+                break
+            if norm_rhs == 0.0:
+                pass
+            elif self.symmetric and self.backend == "saddle-pyamg":
+                u, _ = spla.cg(S, rhs, x0=u, rtol=reduced, atol=0.0, maxiter=left, M=Pinv, callback=callback)
+            else:
+                u, _ = spla.gmres(S, rhs, x0=u, rtol=reduced, atol=0.0, restart=min(RESTART, left),
+                                  maxiter=max(1, -(-left // RESTART)), M=Pinv, callback=callback,
+                                  callback_type="pr_norm")
+            Z = w + self._C(u)
+            mu_x = self._Minv(b_Z - self.Kc @ Z) / s
+            x = np.zeros(self.n)
+            x[:n_u], x[z], x[mu] = u, Z, mu_x
+            residual = float(np.linalg.norm(b - self._matvec(x))) / norm_b
+            if not np.isfinite(residual) or residual <= rtol or norm_rhs == 0.0:
+                break
+            reduced = max(reduced * 0.5 * rtol / residual, np.finfo(float).eps)
         return x, count[0], residual
 
-    def bind(self, A: sp.csr_matrix) -> "ReducedSaddleSolver":
-        self._matvec = A.dot
-        return self
+    def _solve(self, b: np.ndarray, norm_b: float, rtol: float | None) -> tuple[np.ndarray, int, float]:
+        target = self.rtol if rtol is None else max(self.rtol, rtol)
+        x, iterations, residual = self.iterate(b, target, self.max_iterations, rounds=1)
+        if not np.isfinite(residual) or residual > max(10.0 * target, 1e-8):
+            raise LinearSolverError(f"{self.backend}: reached relative residual {residual:.2e} in {iterations} "
+                                    f"Krylov iterations")
+        return x, iterations, residual
+
+    def krylov(self, A: sp.spmatrix, b: np.ndarray, rtol: float, max_iterations: int,
+               x0: np.ndarray | None = None) -> tuple[np.ndarray, int, float, bool]:
+        """A solve of the Krylov path (:class:`~cgfem.solve.solves.LinearSolves`): ``A x = b``
+        by :meth:`iterate` with this preconditioner, the operator rebound to ``A``'s system
+        when ``A`` is a new matrix (with the same unknowns: a later Newton iteration's), so that
+        one system's blocks are held at a time (:meth:`solve` then solves that system too);
+        ``(x, iterations, residual, reached)``; NaN raises
+        :class:`~cgfem.solve.linear.LinearSolverError`."""
+        if self._bound is not A:
+            self._bind(sp.csr_matrix(A))
+            self._bound = A
+        x, iterations, residual = self.iterate(b, rtol, max_iterations, x0)
+        if not np.isfinite(residual):
+            raise LinearSolverError(f"{self.backend}: NaN in the Krylov iterates")
+        return x, iterations, residual, bool(residual <= rtol)
 
 
 def reduced_saddle(A: sp.csr_matrix, n_u: int, constraints: list[FitConstraint], symmetric: bool,
@@ -213,6 +260,6 @@ def reduced_saddle(A: sp.csr_matrix, n_u: int, constraints: list[FitConstraint],
     """Set up :class:`ReducedSaddleSolver` for ``A`` (timed like the other backends)."""
     t0 = time.perf_counter()
     solver = ReducedSaddleSolver(A, n_u, constraints, symmetric, near_null, rtol,
-                                 preconditioner=preconditioner).bind(sp.csr_matrix(A))
+                                 preconditioner=preconditioner)
     solver.info.update(backend=solver.backend, symmetric=symmetric, setup_s=time.perf_counter() - t0)
     return solver

@@ -6,13 +6,14 @@
   large symmetric systems without contact, the reduced saddle solver of ``nurbs_fit``), set up
   once per matrix and kept while Newton passes the same matrix object (or, in modified
   Newton, while ``frozen``);
-- **krylov** (``linear: auto`` on a system of at least ``policy.krylov_min_dofs`` unknowns
-  that is not a saddle point): CG or GMRES preconditioned by smoothed-aggregation AMG with the
-  rigid-body modes (:mod:`cgfem.solve.krylov`). The preconditioner is kept across Newton
+- **krylov** (``linear: auto`` on a system of at least ``policy.krylov_min_dofs`` unknowns):
+  CG or GMRES preconditioned by smoothed-aggregation AMG with the rigid-body modes
+  (:mod:`cgfem.solve.krylov`); a saddle point (``nurbs_fit``) is solved on the bodies' dofs
+  with the AMG of its reduced matrix (:mod:`cgfem.solve.saddle`). The preconditioner is kept across Newton
   iterations, outer passes and load steps while a solve with it needs at most
   ``policy.krylov_refresh`` iterations; past that the solve is repeated with a preconditioner
   of the current matrix, and a solve that stalls even then (``policy.krylov_max_iterations``)
-  falls back to a factorization of that matrix. The tolerance is inexact Newton's
+  falls back to a factorization of that matrix (a saddle point's reduced one). The tolerance is inexact Newton's
   (:func:`cgfem.solve.newton.forcing_rtol`), never tighter than ``policy.krylov_rtol``.
 
 Every choice is logged: the path and backend once, and per Krylov solve its iterations and
@@ -28,7 +29,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from cgfem.solve.backends import choose_backend, factorize
-from cgfem.solve.krylov import AMGPreconditioner, krylov_solve
+from cgfem.solve.krylov import AMGPreconditioner
+from cgfem.solve.saddle import ReducedSaddleSolver, reduced_saddle
 from cgfem.solve import linear
 from cgfem.solve.linear import LinearSolverError
 from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
@@ -36,10 +38,10 @@ from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
 DIRECT, KRYLOV = "direct", "krylov"
 
 
-def solve_path(backend: str, indefinite: bool, n: int, krylov_min_dofs: int) -> str:
-    """:data:`KRYLOV` for ``auto`` on a system of at least ``krylov_min_dofs`` unknowns that is
-    not a saddle point (``indefinite``: ``nurbs_fit``'s fit constraints), else :data:`DIRECT`."""
-    if backend == "auto" and not indefinite and n >= krylov_min_dofs:
+def solve_path(backend: str, n: int, krylov_min_dofs: int) -> str:
+    """:data:`KRYLOV` for ``auto`` on a system of at least ``krylov_min_dofs`` unknowns, else
+    :data:`DIRECT`."""
+    if backend == "auto" and n >= krylov_min_dofs:
         return KRYLOV
     return DIRECT
 
@@ -62,7 +64,7 @@ class LinearSolves:
         #: modified Newton: the last setup serves for a new matrix (or for None)
         self.frozen = False
         #: the Krylov path's kept preconditioner, and whether it was built on the current matrix
-        self._amg: AMGPreconditioner | None = None
+        self._amg: AMGPreconditioner | ReducedSaddleSolver | None = None
         self._fresh = False
         self._logged = False
         self._n = None
@@ -87,8 +89,11 @@ class LinearSolves:
         return self._n is None or self.path(self._n) == DIRECT
 
     def path(self, n: int) -> str:
-        """The path of a system of ``n`` unknowns (:func:`solve_path`)."""
-        return solve_path(self.backend, self.indefinite, n, self.policy.krylov_min_dofs)
+        """The path of a system of ``n`` unknowns (:func:`solve_path`); a saddle point whose fit
+        constraints are not given is factorized whole (:data:`DIRECT`)."""
+        if self.indefinite and self.saddle is None:
+            return DIRECT
+        return solve_path(self.backend, n, self.policy.krylov_min_dofs)
 
     def __call__(self, K: sp.csr_matrix | None, b: np.ndarray, rtol: float | None = None) -> np.ndarray:
         """The solution of ``K x = b``; ``rtol``: the relative residual an iterative solve may
@@ -126,15 +131,13 @@ class LinearSolves:
             if self._amg is None:
                 self._refresh(K)
                 note = "new"
-            x, its, res, ok = krylov_solve(K, b, self._amg, target,
-                                           p.krylov_max_iterations if self._fresh else p.krylov_refresh,
-                                           self.symmetric)
+            x, its, res, ok = self._amg.krylov(K, b, target,
+                                               p.krylov_max_iterations if self._fresh else p.krylov_refresh)
             total = its
             if not ok and not self._fresh:
                 self._refresh(K)
                 note = f"refreshed after {its}"
-                x, its, res, ok = krylov_solve(K, b, self._amg, target, p.krylov_max_iterations, self.symmetric,
-                                               x0=x)
+                x, its, res, ok = self._amg.krylov(K, b, target, p.krylov_max_iterations, x0=x)
                 total += its
         except LinearSolverError as err:      # a breakdown (an indefinite matrix for CG), NaN
             self._amg, ok = None, False
@@ -145,14 +148,24 @@ class LinearSolves:
                      f"{note}; {time.perf_counter() - tic:.2f} s)")
             return x
         direct = "pardiso" if "pardiso" in linear.available_backends() else "superlu"
-        self._factor = factorize(K, backend=direct, symmetric=self.symmetric)
+        if self.saddle is not None:
+            # the saddle point's reduced matrix factorized as its preconditioner
+            self._factor = reduced_saddle(K, self.saddle[0], self.saddle[1], self.symmetric, self.near_null,
+                                          preconditioner=direct)
+        else:
+            self._factor = factorize(K, backend=direct, symmetric=self.symmetric)
         self.history.append((DIRECT, total, "fallback"))
         self.log(f"linear: {kind} stalled at {res:.1e} after {total} iterations (target {target:.1e}; {note}); "
                  f"fell back to {self._factor.backend} for this matrix")
         return self._factor.solve(b)
 
     def _refresh(self, K: sp.csr_matrix) -> None:
-        """A preconditioner of ``K``, kept for the matrices that follow."""
+        """A preconditioner of ``K``, kept for the matrices that follow: AMG of ``K``, or of a
+        saddle point's reduced matrix (:mod:`cgfem.solve.saddle`)."""
         self._amg = None                    # free the old hierarchy first
-        self._amg = AMGPreconditioner(K, self.near_null, self.symmetric)
+        if self.saddle is not None:
+            self._amg = reduced_saddle(K, self.saddle[0], self.saddle[1], self.symmetric, self.near_null,
+                                       self.policy.krylov_rtol, preconditioner="pyamg")
+        else:
+            self._amg = AMGPreconditioner(K, self.near_null, self.symmetric)
         self._fresh = True
