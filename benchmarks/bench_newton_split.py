@@ -83,7 +83,7 @@ def measure(case_path: Path, level: int, surface: str, order: int, krylov_min_do
     timer.wrap(BodyItem, "add", "bulk", lambda self, u, t, r, tangent: tangent)
     timer.wrap(ContactSet, "add", "contact", lambda self, u, r, tangent, update=True: tangent)
     policy = DEFAULT_POLICY if krylov_min_dofs is None else \
-        dataclasses.replace(DEFAULT_POLICY, krylov_min_dofs=krylov_min_dofs)
+        dataclasses.replace(DEFAULT_POLICY, krylov_min_dofs=krylov_min_dofs, krylov_saddle_min_dofs=krylov_min_dofs)
     case = parse_case(parse_yaml(case_path.read_text()), case_path.parent)
     with tempfile.TemporaryDirectory() as folder:
         tic = time.perf_counter()
@@ -137,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--surface", default="nurbs_fe")
     parser.add_argument("--order", type=int, default=1)
     parser.add_argument("--krylov-min-dofs", type=int, default=None,
-                        help="the Krylov path's threshold (default the policy's); 0 forces it")
+                        help="the Krylov path's thresholds, saddle points' too (default the policy's); 0 forces it")
     parser.add_argument("--json", type=Path, help="write the figures to this file")
     args = parser.parse_args(argv)
     row = measure(args.case, args.level, args.surface, args.order, args.krylov_min_dofs)

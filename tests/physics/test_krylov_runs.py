@@ -23,7 +23,7 @@ from tests.support.paths import CASES
 #: every test here solves a whole problem
 pytestmark = pytest.mark.slow
 
-KRYLOV = replace(SolverPolicy(), krylov_min_dofs=0)
+KRYLOV = replace(SolverPolicy(), krylov_min_dofs=0, krylov_saddle_min_dofs=0)
 
 
 def first_step(name: str, fraction: float = 1.0):

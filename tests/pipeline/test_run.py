@@ -9,6 +9,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from dataclasses import replace
 
 import meshio
 import numpy as np
@@ -16,6 +17,7 @@ import pytest
 
 from cgfem.cli import main
 from cgfem.fem.element import HEX8, HEX27
+from cgfem.solve.policy import DEFAULT_POLICY
 
 from tests.support.paths import CASES
 
@@ -54,6 +56,9 @@ CRUSH = textwrap.dedent("""\
     solver: {max_newton: 8, max_cutbacks: 2}
     """)
 
+
+#: a policy under which every system takes the direct path
+DIRECT_ONLY = replace(DEFAULT_POLICY, krylov_min_dofs=10**9, krylov_saddle_min_dofs=10**9)
 
 def _write(tmp_path, text, name="case.yaml"):
     path = tmp_path / name
@@ -152,23 +157,32 @@ def test_memory_guard_compares_with_the_machine_not_the_free_memory():
 
 def test_memory_estimate_follows_the_solve_path():
     """Systems that take the Krylov path (``linear: auto``, at least ``krylov_min_dofs``
-    unknowns, whatever the surface definition: ``nurbs_fit``'s saddle point is reduced to
-    the bodies' dofs there) are estimated without a factorization's fill:
-    ``KRYLOV_MEMORY`` times the direct path's estimate, per element order; chain2_steel at
-    level 4 (1.2M unknowns, 41.7 GiB direct) then fits 23 GiB."""
+    unknowns) are estimated without a factorization's fill: ``KRYLOV_MEMORY`` times the
+    direct path's estimate, per element order; chain2_steel at level 4 (1.2M unknowns, 41.7
+    GiB direct) then fits 23 GiB. ``nurbs_fit`` takes the Krylov path from
+    ``SADDLE_DIRECT_DOFS`` unknowns on, with the direct path's estimate."""
     from cgfem.case import load_case
     from cgfem.run import KRYLOV_MEMORY, estimate_memory
     case = load_case(CASES / "chain2_steel.yaml")
     measures = {b.name: (4.93e-6, 2.13e-3) for b in case.bodies}     # a half torus link: V, A
     for order in (1, 2):
-        direct, dofs, krylov = estimate_memory(case, 4, measures, order, krylov_min_dofs=10**9)
+        direct, dofs, krylov = estimate_memory(case, 4, measures, order, "nurbs_fe", DIRECT_ONLY)
         assert not krylov
-        iterative, same, krylov = estimate_memory(case, 4, measures, order)
+        iterative, same, krylov = estimate_memory(case, 4, measures, order, "nurbs_fe")
         assert krylov and same == dofs >= 100_000
         assert iterative == pytest.approx(KRYLOV_MEMORY[order] * direct, rel=1e-9)
-    # a size below the Krylov threshold is the direct path's
-    small = estimate_memory(case, 0, measures, 1)
+        # nurbs_fit on the Krylov path: the direct estimate
+        assert estimate_memory(case, 4, measures, order, "nurbs_fit") == (direct, dofs, True)
+    # a size below the Krylov threshold is the direct path's; nurbs_fit's has its own threshold
+    small = estimate_memory(case, 0, measures, 1, "nurbs_fe")
     assert small[1] < 100_000 and not small[2]
+    least = DEFAULT_POLICY.krylov_saddle_min_dofs
+    sides = set()
+    for level in (0, 1, 2, 3):
+        direct, dofs, _ = estimate_memory(case, level, measures, 1, "nurbs_fe", DIRECT_ONLY)
+        assert estimate_memory(case, level, measures, 1, "nurbs_fit") == (direct, dofs, dofs >= least)
+        sides.add(dofs >= least)
+    assert sides == {False, True}
 
 
 def test_memory_estimate_without_contact_lets_the_bent_half_torus_run_order_2_at_level_3():
@@ -176,8 +190,6 @@ def test_memory_estimate_without_contact_lets_the_bent_half_torus_run_order_2_at
     torus at order 2, level 3 (about 750k unknowns; measured peak 14.7 GiB) is estimated
     below 23 GiB; the same two links with and without their contact pair differ by the
     factor alone."""
-    from dataclasses import replace
-
     from cgfem.case import load_case
     from cgfem.run import KRYLOV_MEMORY, KRYLOV_MEMORY_NO_CONTACT, estimate_memory
     bent = load_case(CASES / "bent_half_torus.yaml")
@@ -186,7 +198,7 @@ def test_memory_estimate_without_contact_lets_the_bent_half_torus_run_order_2_at
     assert krylov and dofs > 600_000 and 14.7 * 2**30 < need < 23 * 2**30
     chain = load_case(CASES / "chain2_steel.yaml")
     measures = {b.name: (4.93e-6, 2.13e-3) for b in chain.bodies}
-    direct = estimate_memory(chain, 3, measures, 2, krylov_min_dofs=10**9)[0]
+    direct = estimate_memory(chain, 3, measures, 2, "nurbs_fe", DIRECT_ONLY)[0]
     assert estimate_memory(chain, 3, measures, 2)[0] == pytest.approx(KRYLOV_MEMORY[2] * direct, rel=1e-9)
     alone = estimate_memory(replace(chain, contact=()), 3, measures, 2)[0]
     assert alone == pytest.approx(KRYLOV_MEMORY_NO_CONTACT[2] * direct, rel=1e-9)

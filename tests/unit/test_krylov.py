@@ -123,14 +123,19 @@ def test_stalled_solve_falls_back_to_a_factorization():
     assert solves.history[-1][2] == "fallback kept"
 
 
-def test_direct_below_the_size_threshold_and_for_saddle_points():
-    """``auto`` takes the direct path below ``krylov_min_dofs`` and for saddle points; an
-    explicit backend always."""
+def test_direct_below_the_size_thresholds_and_for_saddle_points_not_given():
+    """``auto`` takes the direct path below ``krylov_min_dofs``, for a saddle point below
+    ``krylov_saddle_min_dofs`` or whose fit constraints are not given; an explicit backend
+    always."""
     K, b, B = two_bodies(True)
     n = K.shape[0]
     assert LinearSolves("auto", B, policy=replace(SolverPolicy(), krylov_min_dofs=n + 1)).path(n) == DIRECT
     assert LinearSolves("auto", B, policy=policy()).path(n) == KRYLOV
     assert LinearSolves("auto", B, indefinite=True, policy=policy()).path(n) == DIRECT
+    saddle = (n, [])
+    for least, path in ((n, KRYLOV), (n + 1, DIRECT)):
+        given = replace(SolverPolicy(), krylov_min_dofs=10**9, krylov_saddle_min_dofs=least)
+        assert LinearSolves("auto", B, indefinite=True, saddle=saddle, policy=given).path(n) == path
     assert LinearSolves("superlu", B, policy=policy()).path(n) == DIRECT
 
 

@@ -75,8 +75,12 @@ class SolverPolicy:
     Linear solves (:class:`~cgfem.solve.solves.LinearSolves`)
     ----------------------------------------------------------
     krylov_min_dofs : ``linear: auto`` solves a system of at least this many unknowns by the
-        preconditioned Krylov path (a saddle point on its bodies' dofs), smaller ones by the
-        direct path (:mod:`cgfem.solve.backends`).
+        preconditioned Krylov path, smaller ones by the direct path
+        (:mod:`cgfem.solve.backends`).
+    krylov_saddle_min_dofs : the same for ``nurbs_fit``'s saddle points (on the Krylov path
+        solved on the bodies' dofs with the AMG of the reduced matrix kept; on the direct path
+        factorized whole up to ``SADDLE_DIRECT_DOFS``, above it reduced with a factorized
+        preconditioner rebuilt for every matrix).
     krylov_refresh : a Krylov solve that needs more than this many iterations with a kept
         preconditioner is repeated with a preconditioner of the current matrix.
     krylov_max_iterations : iterations after which a Krylov solve with a fresh
@@ -104,6 +108,7 @@ class SolverPolicy:
     rotation_stretch: float = 1.0
     onset_penetration: float = 0.1
     krylov_min_dofs: int = 100_000
+    krylov_saddle_min_dofs: int = 40_000
     krylov_refresh: int = 40
     krylov_max_iterations: int = 400
     krylov_rtol: float = 1e-10

@@ -6,10 +6,11 @@
   large symmetric systems without contact, the reduced saddle solver of ``nurbs_fit``), set up
   once per matrix and kept while Newton passes the same matrix object (or, in modified
   Newton, while ``frozen``);
-- **krylov** (``linear: auto`` on a system of at least ``policy.krylov_min_dofs`` unknowns):
-  CG or GMRES preconditioned by smoothed-aggregation AMG with the rigid-body modes
-  (:mod:`cgfem.solve.krylov`); a saddle point (``nurbs_fit``) is solved on the bodies' dofs
-  with the AMG of its reduced matrix (:mod:`cgfem.solve.saddle`). The preconditioner is kept across Newton
+- **krylov** (``linear: auto`` on a system of at least ``policy.krylov_min_dofs`` unknowns, a
+  saddle point of at least ``policy.krylov_saddle_min_dofs``): CG or GMRES preconditioned by
+  smoothed-aggregation AMG with the rigid-body modes (:mod:`cgfem.solve.krylov`); a saddle
+  point (``nurbs_fit``) is solved on the bodies' dofs with the AMG of its reduced matrix
+  (:mod:`cgfem.solve.saddle`). The preconditioner is kept across Newton
   iterations, outer passes and load steps while a solve with it needs at most
   ``policy.krylov_refresh`` iterations; past that the solve is repeated with a preconditioner
   of the current matrix, and a solve that stalls even then (``policy.krylov_max_iterations``)
@@ -38,12 +39,12 @@ from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
 DIRECT, KRYLOV = "direct", "krylov"
 
 
-def solve_path(backend: str, n: int, krylov_min_dofs: int) -> str:
-    """:data:`KRYLOV` for ``auto`` on a system of at least ``krylov_min_dofs`` unknowns, else
-    :data:`DIRECT`."""
-    if backend == "auto" and n >= krylov_min_dofs:
-        return KRYLOV
-    return DIRECT
+def solve_path(backend: str, n: int, policy: SolverPolicy = DEFAULT_POLICY, saddle: bool = False) -> str:
+    """:data:`KRYLOV` for ``auto`` on a system of at least ``policy.krylov_min_dofs`` unknowns,
+    or on a ``saddle`` point (``nurbs_fit``'s, reduced to the bodies' dofs) of at least
+    ``policy.krylov_saddle_min_dofs``; else :data:`DIRECT`."""
+    least = policy.krylov_saddle_min_dofs if saddle else policy.krylov_min_dofs
+    return KRYLOV if backend == "auto" and n >= least else DIRECT
 
 
 class LinearSolves:
@@ -93,7 +94,7 @@ class LinearSolves:
         constraints are not given is factorized whole (:data:`DIRECT`)."""
         if self.indefinite and self.saddle is None:
             return DIRECT
-        return solve_path(self.backend, n, self.policy.krylov_min_dofs)
+        return solve_path(self.backend, n, self.policy, self.indefinite)
 
     def __call__(self, K: sp.csr_matrix | None, b: np.ndarray, rtol: float | None = None) -> np.ndarray:
         """The solution of ``K x = b``; ``rtol``: the relative residual an iterative solve may
