@@ -202,32 +202,38 @@ class ReducedSaddleSolver(LinearSolver):
         def callback(*_):
             count[0] += 1
         norm_rhs = float(np.linalg.norm(rhs))
+        if norm_rhs == 0.0:
+            x = self._whole(np.zeros(n_u), w, b_Z)
+            return x, 0, float(np.linalg.norm(b - self._matvec(x))) / norm_b
         # the residual of the bodies' rows is the whole system's (Z and mu are exact given
         # u), measured against b: a stiff contact tangent makes rhs much larger than b
-        reduced = rtol * min(1.0, norm_b / norm_rhs) if norm_rhs > 0.0 else rtol
-        u = np.zeros(n_u) if x0 is None or norm_rhs == 0.0 else np.array(x0[:n_u], dtype=np.float64)
+        reduced = rtol * min(1.0, norm_b / norm_rhs)
+        u = None if x0 is None else np.array(x0[:n_u], dtype=np.float64)
         x, residual = np.zeros(self.n), np.inf
         for _ in range(rounds):
             left = max_iterations - count[0]
-            if norm_rhs > 0.0 and left <= 0:
+            if left <= 0:
                 break
-            if norm_rhs == 0.0:
-                pass
-            elif self.symmetric and self.backend == "saddle-pyamg":
+            if self.symmetric and self.backend == "saddle-pyamg":
                 u, _ = spla.cg(S, rhs, x0=u, rtol=reduced, atol=0.0, maxiter=left, M=Pinv, callback=callback)
             else:
                 u, _ = spla.gmres(S, rhs, x0=u, rtol=reduced, atol=0.0, restart=min(RESTART, left),
                                   maxiter=max(1, -(-left // RESTART)), M=Pinv, callback=callback,
                                   callback_type="pr_norm")
-            Z = w + self._C(u)
-            mu_x = self._Minv(b_Z - self.Kc @ Z) / s
-            x = np.zeros(self.n)
-            x[:n_u], x[z], x[mu] = u, Z, mu_x
+            x = self._whole(u, w, b_Z)
             residual = float(np.linalg.norm(b - self._matvec(x))) / norm_b
-            if not np.isfinite(residual) or residual <= rtol or norm_rhs == 0.0:
+            if not np.isfinite(residual) or residual <= rtol:
                 break
             reduced = max(reduced * 0.5 * rtol / residual, np.finfo(float).eps)
         return x, count[0], residual
+
+    def _whole(self, u: np.ndarray, w: np.ndarray, b_Z: np.ndarray) -> np.ndarray:
+        """All unknowns (n,) from the bodies' ``u``: ``Z = w + C u`` (``w = M^-1 b_mu / s``) and
+        ``mu = M^-1 (b_Z - Kc Z) / s``, exact given ``u``."""
+        Z = w + self._C(u)
+        x = np.zeros(self.n)
+        x[:self.n_u], x[self._z], x[self._mu] = u, Z, self._Minv(b_Z - self.Kc @ Z) / self._s
+        return x
 
     def _solve(self, b: np.ndarray, norm_b: float, rtol: float | None) -> tuple[np.ndarray, int, float]:
         target = self.rtol if rtol is None else max(self.rtol, rtol)
