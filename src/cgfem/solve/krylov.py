@@ -24,7 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from cgfem.solve.linear import LinearSolverError, smoothed_aggregation, v_cycle
+from cgfem.solve.linear import LinearSolverError, scale_symmetric, smoothed_aggregation, v_cycle
 
 #: inner iterations of one GMRES cycle
 RESTART = 50
@@ -59,7 +59,7 @@ class AMGPreconditioner:
             raise LinearSolverError("amg: zero diagonal entries, NaN or inf in the matrix")
         self.n, self.symmetric = A.shape[0], symmetric
         self._s = 1.0 / np.sqrt(np.abs(d))
-        As = (sp.diags(self._s) @ A @ sp.diags(self._s)).tocsr()
+        As = scale_symmetric(A, self._s)
         if symmetric:
             As = (0.5 * (As + As.T)).tocsr()
         B = None if near_null is None else collapse_modes(np.asarray(near_null, float)) / self._s[:, None]

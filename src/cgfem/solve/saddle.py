@@ -38,7 +38,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from cgfem.solve.linear import LinearSolver, LinearSolverError, build, smoothed_aggregation, v_cycle
+from cgfem.solve.linear import (LinearSolver, LinearSolverError, build, scale_symmetric,
+                                smoothed_aggregation, v_cycle)
 
 #: inner iterations of one GMRES cycle
 RESTART = 50
@@ -135,7 +136,7 @@ class ReducedSaddleSolver(LinearSolver):
             self._precondition = factor.solve_unchecked
             return
         s = 1.0 / np.sqrt(d)
-        Ps = (sp.diags(s) @ P @ sp.diags(s)).tocsr()
+        Ps = scale_symmetric(P, s)
         B = None if near_null is None else near_null[:n_u] / s[:, None]
         # as for the bodies' own matrices (cgfem.solve.linear): nodal 3x3 blocks, and the
         # given near-null space taken as it is (improving it costs relaxation sweeps on all
