@@ -50,13 +50,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.spatial import cKDTree
 from threadpoolctl import ThreadpoolController
 
 from cgfem.contact import _ray_kernels as _rk
 from cgfem.contact.kinematics import (SlaveFrames, SlaveState, area_weight, gap_derivatives,
                                       gap_gradient_direction, state_of)
-from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface, RayHits
+from cgfem.contact.surfaces import FacetSurface, NurbsFeSurface, RayHits, surface_tree
 
 #: slave points whose (D, D) tangents (D = 48 for NURBS+FE and facets with trilinear
 #: elements, 162 with triquadratic ones) are formed at once at D = 48, and proportionally
@@ -250,9 +249,9 @@ class ContactPair:
         reach = self.max_gap + radius + skin
         rows = near = np.zeros(0, np.int64)
         if points.shape[0] and x.shape[0]:
-            rows = np.flatnonzero(cKDTree(points).query(x, distance_upper_bound=reach)[0] <= reach)
+            rows = np.flatnonzero(surface_tree(points).query(x, distance_upper_bound=reach)[0] <= reach)
             if rows.size:
-                near = np.flatnonzero(cKDTree(x[rows]).query(points, distance_upper_bound=reach)[0] <= reach)
+                near = np.flatnonzero(surface_tree(x[rows]).query(points, distance_upper_bound=reach)[0] <= reach)
         self.state.candidates = (rows, near, u_s.copy(), u_m.copy())
         return rows, near
 

@@ -64,6 +64,15 @@ def element_values(space: Space, u: np.ndarray, slots: np.ndarray) -> np.ndarray
     return u.reshape(-1, 3)[space.connectivity[slots]]
 
 
+def surface_tree(points: np.ndarray) -> cKDTree:
+    """A k-d tree of points (m, 3) on a surface, with sliding-midpoint splits and nodes not
+    shrunk to their points: queried from off the surface (bounded nearest-point queries) it
+    answers several times faster than scipy's default median splits (the Verlet list of
+    :meth:`cgfem.contact.pair.ContactPair.candidates` on chain3's order-2 master: 0.02 s
+    against 0.26 s), with the same distances."""
+    return cKDTree(points, leafsize=32, balanced_tree=False, compact_nodes=False)
+
+
 def locate_points(space: Space, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Active element (n,) and local coordinates (n, 3) of surface points ``x`` (n, 3);
     every point of the boundary lies in a cut element, so none may be missing."""
@@ -260,9 +269,7 @@ class RaySurface:
         m = int(np.ceil(2.0 * max_gap / self.spacing)) + 1
         ts = np.linspace(-max_gap, max_gap, m)
         samples = x1[:, None, :] + ts[None, :, None] * n1[:, None, :]
-        # sliding-midpoint splits: a median-split tree over points on a surface is slower to
-        # query from off the surface (the nearest seed is the same)
-        tree = cKDTree(seeds_x, leafsize=32, balanced_tree=False, compact_nodes=False)
+        tree = surface_tree(seeds_x)
         # a sample farther than SAMPLE_REACH spacings from every seed has none: the bounded
         # query is much cheaper for the many rays that miss (docs/performance.md)
         _, idx = tree.query(samples.reshape(-1, 3), distance_upper_bound=SAMPLE_REACH * self.spacing,
