@@ -83,7 +83,8 @@ def measure(case_path: Path, level: int, surface: str, order: int, krylov_min_do
     timer.wrap(BodyItem, "add", "bulk", lambda self, u, t, r, tangent: tangent)
     timer.wrap(ContactSet, "add", "contact", lambda self, u, r, tangent, update=True: tangent)
     policy = DEFAULT_POLICY if krylov_min_dofs is None else \
-        dataclasses.replace(DEFAULT_POLICY, krylov_min_dofs=krylov_min_dofs, krylov_saddle_min_dofs=krylov_min_dofs)
+        dataclasses.replace(DEFAULT_POLICY, krylov_min_dofs=krylov_min_dofs,
+                            krylov_floating_min_dofs=krylov_min_dofs, krylov_saddle_min_dofs=krylov_min_dofs)
     case = parse_case(parse_yaml(case_path.read_text()), case_path.parent)
     with tempfile.TemporaryDirectory() as folder:
         tic = time.perf_counter()

@@ -242,6 +242,9 @@ def test_cut_back_reaches_the_step_in_equal_sub_steps(monkeypatch):
         def near_null(self):
             return np.ones((1, 1))
 
+        def held_by_contact_alone(self):
+            return False
+
     taken = []
 
     def increment(system, solves, u, stress, t, options, log, guess=None):

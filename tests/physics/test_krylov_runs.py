@@ -23,7 +23,7 @@ from tests.support.paths import CASES
 #: every test here solves a whole problem
 pytestmark = pytest.mark.slow
 
-KRYLOV = replace(SolverPolicy(), krylov_min_dofs=0, krylov_saddle_min_dofs=0)
+KRYLOV = replace(SolverPolicy(), krylov_min_dofs=0, krylov_floating_min_dofs=0, krylov_saddle_min_dofs=0)
 
 
 def first_step(name: str, fraction: float = 1.0):
@@ -132,3 +132,21 @@ def test_krylov_path_solves_the_fitted_steel_chain_and_falls_back_when_stalled(t
     assert sum("fell back to saddle-" in line for line in lines) >= newton_iterations(fallen) // 2
     c = reactions(fallen)
     assert np.abs(a - c).max() <= 1e-8 * np.abs(a).max()
+
+
+def test_a_body_held_by_contact_alone_keeps_the_direct_path_longer():
+    """chain3's middle link has no displacement conditions: with ``krylov_min_dofs = 0`` its
+    Newton systems still take the direct path (below ``krylov_floating_min_dofs``), while
+    chain2_steel's take the Krylov path; the built system and the case file agree on which
+    is which."""
+    from cgfem.run import build_bodies, build_pairs
+    from cgfem.solve.solves import DIRECT, KRYLOV, LinearSolves
+    from cgfem.solve.system import System
+
+    policy = replace(SolverPolicy(), krylov_min_dofs=0)
+    for name, floating in (("chain3", True), ("chain2_steel", False)):
+        case = first_step(name)
+        models, _, solids = build_bodies(case, 0, "nurbs_fe", lambda message: None)
+        system = System(models, build_pairs(case, models, solids, "nurbs_fe", lambda message: None), policy)
+        assert system.held_by_contact_alone() == case.held_by_contact_alone == floating
+        assert LinearSolves.of(system, "auto").path(system.n_dofs) == (DIRECT if floating else KRYLOV)

@@ -124,13 +124,17 @@ def test_stalled_solve_falls_back_to_a_factorization():
 
 
 def test_direct_below_the_size_thresholds_and_for_saddle_points_not_given():
-    """``auto`` takes the direct path below ``krylov_min_dofs``, for a saddle point below
+    """``auto`` takes the direct path below ``krylov_min_dofs``, with a body held by contact
+    alone below ``krylov_floating_min_dofs``, for a saddle point below
     ``krylov_saddle_min_dofs`` or whose fit constraints are not given; an explicit backend
     always."""
     K, b, B = two_bodies(True)
     n = K.shape[0]
     assert LinearSolves("auto", B, policy=replace(SolverPolicy(), krylov_min_dofs=n + 1)).path(n) == DIRECT
     assert LinearSolves("auto", B, policy=policy()).path(n) == KRYLOV
+    for floating, least, path in ((True, n + 1, DIRECT), (True, n, KRYLOV), (False, n + 1, KRYLOV)):
+        given = policy(krylov_floating_min_dofs=least)
+        assert LinearSolves("auto", B, policy=given, floating=floating).path(n) == path
     assert LinearSolves("auto", B, indefinite=True, policy=policy()).path(n) == DIRECT
     saddle = (n, [])
     for least, path in ((n, KRYLOV), (n + 1, DIRECT)):

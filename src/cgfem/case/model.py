@@ -326,6 +326,14 @@ class Case:
                                      f"are already paired by contact[{j}]")
 
     @property
+    def held_by_contact_alone(self) -> bool:
+        """Whether a body has no displacement conditions (with contact: held by contact
+        alone), as :meth:`cgfem.solve.system.System.held_by_contact_alone` decides on the
+        built bodies."""
+        supported = {bc.body for bc in self.boundary if isinstance(bc, DisplacementBC)}
+        return bool(self.contact) and any(b.name not in supported for b in self.bodies)
+
+    @property
     def body_names(self) -> tuple[str, ...]:
         """Names of the bodies, in file order."""
         return tuple(b.name for b in self.bodies)

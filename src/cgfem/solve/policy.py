@@ -77,6 +77,10 @@ class SolverPolicy:
     krylov_min_dofs : ``linear: auto`` solves a system of at least this many unknowns by the
         preconditioned Krylov path, smaller ones by the direct path
         (:mod:`cgfem.solve.backends`).
+    krylov_floating_min_dofs : the same for a system with a body held by contact alone (no
+        displacement conditions of its own: chain3's middle link), whose Newton solves the
+        Krylov path takes several times longer (more outer passes with loose passes, more
+        GMRES iterations on its soft modes).
     krylov_saddle_min_dofs : the same for ``nurbs_fit``'s saddle points (on the Krylov path
         solved on the bodies' dofs with the AMG of the reduced matrix kept; on the direct path
         factorized whole up to ``SADDLE_DIRECT_DOFS``, above it reduced with a factorized
@@ -107,7 +111,8 @@ class SolverPolicy:
     damping_max: float = 1e6
     rotation_stretch: float = 1.0
     onset_penetration: float = 0.1
-    krylov_min_dofs: int = 100_000
+    krylov_min_dofs: int = 20_000
+    krylov_floating_min_dofs: int = 100_000
     krylov_saddle_min_dofs: int = 40_000
     krylov_refresh: int = 40
     krylov_max_iterations: int = 400

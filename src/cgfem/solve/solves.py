@@ -6,8 +6,9 @@
   large symmetric systems without contact, the reduced saddle solver of ``nurbs_fit``), set up
   once per matrix and kept while Newton passes the same matrix object (or, in modified
   Newton, while ``frozen``);
-- **krylov** (``linear: auto`` on a system of at least ``policy.krylov_min_dofs`` unknowns, a
-  saddle point of at least ``policy.krylov_saddle_min_dofs``): CG or GMRES preconditioned by
+- **krylov** (``linear: auto`` on a system of at least ``policy.krylov_min_dofs`` unknowns,
+  ``policy.krylov_floating_min_dofs`` with a body held by contact alone, a saddle point of at
+  least ``policy.krylov_saddle_min_dofs``): CG or GMRES preconditioned by
   smoothed-aggregation AMG with the rigid-body modes (:mod:`cgfem.solve.krylov`); a saddle
   point (``nurbs_fit``) is solved on the bodies' dofs with the AMG of its reduced matrix
   (:mod:`cgfem.solve.saddle`). The preconditioner is kept across Newton
@@ -39,11 +40,17 @@ from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
 DIRECT, KRYLOV = "direct", "krylov"
 
 
-def solve_path(backend: str, n: int, policy: SolverPolicy = DEFAULT_POLICY, saddle: bool = False) -> str:
-    """:data:`KRYLOV` for ``auto`` on a system of at least ``policy.krylov_min_dofs`` unknowns,
-    or on a ``saddle`` point (``nurbs_fit``'s, reduced to the bodies' dofs) of at least
-    ``policy.krylov_saddle_min_dofs``; else :data:`DIRECT`."""
-    least = policy.krylov_saddle_min_dofs if saddle else policy.krylov_min_dofs
+def solve_path(backend: str, n: int, policy: SolverPolicy = DEFAULT_POLICY, saddle: bool = False,
+               floating: bool = False) -> str:
+    """:data:`KRYLOV` for ``auto`` on a ``saddle`` point (``nurbs_fit``'s, reduced to the
+    bodies' dofs) of at least ``policy.krylov_saddle_min_dofs`` unknowns, on another system
+    with a body held by contact alone (``floating``) of at least
+    ``policy.krylov_floating_min_dofs``, on any other of at least ``policy.krylov_min_dofs``;
+    else :data:`DIRECT`."""
+    if saddle:
+        least = policy.krylov_saddle_min_dofs
+    else:
+        least = policy.krylov_floating_min_dofs if floating else policy.krylov_min_dofs
     return KRYLOV if backend == "auto" and n >= least else DIRECT
 
 
@@ -52,14 +59,16 @@ class LinearSolves:
 
     ``backend``: the case's ``solver.linear`` (``auto`` or a backend name); ``near_null``
     (n, k): the rigid-body modes of every body (AMG); ``symmetric``, ``indefinite`` (a saddle
-    point), ``saddle``: the system's structure (:class:`~cgfem.solve.system.System`).
+    point), ``saddle``, ``floating`` (a body held by contact alone): the system's structure
+    (:class:`~cgfem.solve.system.System`).
     Failures raise :class:`~cgfem.solve.linear.LinearSolverError`, which Newton reports."""
 
     def __init__(self, backend: str, near_null: np.ndarray, symmetric: bool = True, indefinite: bool = False,
                  saddle: tuple | None = None, policy: SolverPolicy = DEFAULT_POLICY,
-                 log: Callable[[str], None] | None = None):
+                 log: Callable[[str], None] | None = None, floating: bool = False):
         self.backend, self.near_null, self.symmetric = backend, near_null, symmetric
         self.indefinite, self.saddle, self.policy = indefinite, saddle, policy
+        self.floating = floating
         self.log = log or (lambda message: None)
         self._key, self._factor = None, None
         #: modified Newton: the last setup serves for a new matrix (or for None)
@@ -78,7 +87,7 @@ class LinearSolves:
         that backend cannot solve them."""
         choose_backend(system.n_dofs, system.symmetric, backend, system.indefinite)
         solves = cls(backend, system.near_null(), system.symmetric, system.indefinite, system.saddle(),
-                     system.policy, log)
+                     system.policy, log, system.held_by_contact_alone())
         solves._n = system.n_dofs
         return solves
 
@@ -94,7 +103,7 @@ class LinearSolves:
         constraints are not given is factorized whole (:data:`DIRECT`)."""
         if self.indefinite and self.saddle is None:
             return DIRECT
-        return solve_path(self.backend, n, self.policy, self.indefinite)
+        return solve_path(self.backend, n, self.policy, self.indefinite, self.floating)
 
     def __call__(self, K: sp.csr_matrix | None, b: np.ndarray, rtol: float | None = None) -> np.ndarray:
         """The solution of ``K x = b``; ``rtol``: the relative residual an iterative solve may

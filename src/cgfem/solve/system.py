@@ -236,6 +236,11 @@ class System:
             FitConstraint(b.z, b.mu, self.offsets[b.body] + np.arange(self.bodies[b.body].n_dofs), b.fit.M, b.fit.G,
                           b.fit.factor.solve, b.scale) for b in blocks]
 
+    def held_by_contact_alone(self) -> bool:
+        """Whether a body has no displacement conditions of its own (with contact: held by
+        contact alone, every rigid motion free until contact closes)."""
+        return bool(self.contact) and any(not b.dirichlet for b in self.bodies)
+
     def near_null(self) -> np.ndarray:
         """Rigid-body modes of every body, block by block (n_dofs, 6 n_bodies); zero on the
         contact set's own unknowns."""
