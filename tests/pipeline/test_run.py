@@ -188,16 +188,18 @@ def test_memory_estimate_follows_the_solve_path():
 def test_a_body_held_by_contact_alone_keeps_the_direct_path_longer():
     """The estimate's path follows ``krylov_floating_min_dofs`` where a body has no
     displacement conditions (chain3's middle link) and ``krylov_min_dofs`` elsewhere: at a
-    size between the two chain2_steel takes the Krylov path and chain3 the direct one."""
+    size between the two (with ``krylov_min_dofs = 20_000``) chain2_steel takes the Krylov
+    path and chain3 the direct one."""
     from cgfem.case import load_case
     from cgfem.run import estimate_memory
     measures = {name: (4.93e-6, 2.13e-3) for name in ("link_a", "link_b", "link_c")}
     steel, chain3 = (load_case(CASES / f"{name}.yaml") for name in ("chain2_steel", "chain3"))
     assert chain3.held_by_contact_alone and not steel.held_by_contact_alone
-    _, dofs, krylov = estimate_memory(steel, 2, measures)
-    assert DEFAULT_POLICY.krylov_min_dofs <= dofs < DEFAULT_POLICY.krylov_floating_min_dofs and krylov
-    _, dofs, krylov = estimate_memory(chain3, 2, measures)
-    assert DEFAULT_POLICY.krylov_min_dofs <= dofs < DEFAULT_POLICY.krylov_floating_min_dofs and not krylov
+    policy = replace(DEFAULT_POLICY, krylov_min_dofs=20_000)
+    _, dofs, krylov = estimate_memory(steel, 2, measures, policy=policy)
+    assert policy.krylov_min_dofs <= dofs < policy.krylov_floating_min_dofs and krylov
+    _, dofs, krylov = estimate_memory(chain3, 2, measures, policy=policy)
+    assert policy.krylov_min_dofs <= dofs < policy.krylov_floating_min_dofs and not krylov
 
 
 def test_memory_estimate_without_contact_lets_the_bent_half_torus_run_order_2_at_level_3():

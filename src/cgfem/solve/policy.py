@@ -111,7 +111,7 @@ class SolverPolicy:
     damping_max: float = 1e6
     rotation_stretch: float = 1.0
     onset_penetration: float = 0.1
-    krylov_min_dofs: int = 20_000
+    krylov_min_dofs: int = 100_000
     krylov_floating_min_dofs: int = 100_000
     krylov_saddle_min_dofs: int = 40_000
     krylov_refresh: int = 40
