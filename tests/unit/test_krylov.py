@@ -135,6 +135,9 @@ def test_direct_below_the_size_thresholds_and_for_saddle_points_not_given():
     for floating, least, path in ((True, n + 1, DIRECT), (True, n, KRYLOV), (False, n + 1, KRYLOV)):
         given = policy(krylov_floating_min_dofs=least)
         assert LinearSolves("auto", B, policy=given, floating=floating).path(n) == path
+    # a direct-only policy stays direct for a floating body below its own threshold
+    given = replace(SolverPolicy(), krylov_min_dofs=n + 1, krylov_floating_min_dofs=0)
+    assert LinearSolves("auto", B, policy=given, floating=True).path(n) == DIRECT
     assert LinearSolves("auto", B, indefinite=True, policy=policy()).path(n) == DIRECT
     saddle = (n, [])
     for least, path in ((n, KRYLOV), (n + 1, DIRECT)):

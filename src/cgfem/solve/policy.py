@@ -77,10 +77,10 @@ class SolverPolicy:
     krylov_min_dofs : ``linear: auto`` solves a system of at least this many unknowns by the
         preconditioned Krylov path, smaller ones by the direct path
         (:mod:`cgfem.solve.backends`).
-    krylov_floating_min_dofs : the same for a system with a body held by contact alone (no
-        displacement conditions of its own: chain3's middle link), whose Newton solves the
-        Krylov path takes several times longer (more outer passes with loose passes, more
-        GMRES iterations on its soft modes).
+    krylov_floating_min_dofs : the further threshold, besides ``krylov_min_dofs``, of a system
+        with a body held by contact alone (no displacement conditions of its own: chain3's
+        middle link), whose Newton solves the Krylov path takes several times longer (more
+        outer passes with loose passes, more GMRES iterations on its soft modes).
     krylov_saddle_min_dofs : the same for ``nurbs_fit``'s saddle points (on the Krylov path
         solved on the bodies' dofs with the AMG of the reduced matrix kept; on the direct path
         factorized whole up to ``SADDLE_DIRECT_DOFS``, above it reduced with a factorized

@@ -43,14 +43,13 @@ DIRECT, KRYLOV = "direct", "krylov"
 def solve_path(backend: str, n: int, policy: SolverPolicy = DEFAULT_POLICY, saddle: bool = False,
                floating: bool = False) -> str:
     """:data:`KRYLOV` for ``auto`` on a ``saddle`` point (``nurbs_fit``'s, reduced to the
-    bodies' dofs) of at least ``policy.krylov_saddle_min_dofs`` unknowns, on another system
-    with a body held by contact alone (``floating``) of at least
-    ``policy.krylov_floating_min_dofs``, on any other of at least ``policy.krylov_min_dofs``;
-    else :data:`DIRECT`."""
+    bodies' dofs) of at least ``policy.krylov_saddle_min_dofs`` unknowns, on any other of at
+    least ``policy.krylov_min_dofs`` and, with a body held by contact alone (``floating``), of
+    at least ``policy.krylov_floating_min_dofs`` too; else :data:`DIRECT`."""
     if saddle:
         least = policy.krylov_saddle_min_dofs
     else:
-        least = policy.krylov_floating_min_dofs if floating else policy.krylov_min_dofs
+        least = max(policy.krylov_min_dofs, policy.krylov_floating_min_dofs if floating else 0)
     return KRYLOV if backend == "auto" and n >= least else DIRECT
 
 
