@@ -222,28 +222,36 @@ def test_reference_matrix_equals_the_independent_voigt_brick():
     assert np.abs(ke - fx.brick_stiffness(h, E, nu)).max() < 1e-14 * np.abs(ke).max()
 
 
+class _OneDof:
+    """A system of one unknown for the load-step control's tests, whose increments are
+    scripted (``solve_increment`` replaced): the attributes the linear solves ask for."""
+
+    n_dofs, symmetric, indefinite, bodies = 1, True, False, [None]
+
+    def __init__(self, policy=None):
+        from cgfem.solve.policy import SolverPolicy
+
+        self.policy = policy or SolverPolicy()
+
+    def split(self, u):
+        return [u]
+
+    def saddle(self):
+        return None
+
+    def near_null(self):
+        return np.ones((1, 1))
+
+    def held_by_contact_alone(self):
+        return False
+
+
 def test_cut_back_reaches_the_step_in_equal_sub_steps(monkeypatch):
     """An increment that fails is halved until it succeeds; the rest of the step is then
     taken in sub-steps of that size (not ever smaller ones)."""
     import cgfem.solve.static as static
     from cgfem.case.model import SolverOptions
     from cgfem.solve.outer import Increment, IncrementFailure
-    from cgfem.solve.policy import SolverPolicy
-
-    class OneDof:
-        n_dofs, symmetric, indefinite, bodies, policy = 1, True, False, [None], SolverPolicy()
-
-        def split(self, u):
-            return [u]
-
-        def saddle(self):
-            return None
-
-        def near_null(self):
-            return np.ones((1, 1))
-
-        def held_by_contact_alone(self):
-            return False
 
     taken = []
 
@@ -254,12 +262,50 @@ def test_cut_back_reaches_the_step_in_equal_sub_steps(monkeypatch):
         return Increment(u, stress, stress, [[1.0, 0.0]], [0.0], True)
 
     monkeypatch.setattr(static, "solve_increment", increment)
-    result = static.solve_static(OneDof(), 1, SolverOptions(max_cutbacks=2))
+    result = static.solve_static(_OneDof(), 1, SolverOptions(max_cutbacks=2))
     assert result.status == "converged"
     assert taken == pytest.approx([0.25, 0.5, 0.75, 1.0])
     taken.clear()
-    result = static.solve_static(OneDof(), 1, SolverOptions(max_cutbacks=1))
+    result = static.solve_static(_OneDof(), 1, SolverOptions(max_cutbacks=1))
     assert result.status == "failed" and taken == []
     assert result.failure == IncrementFailure("max_iterations", 1, 0.5, 30)
     assert result.message.endswith("after 1 cut-backs (last attempt: Newton stopped on max_iterations in "
                                    "outer pass 1 at |r|/ref = 5.00e-01 after 30 iterations)")
+
+
+def test_a_failure_after_loose_passes_is_tried_again_with_tight_passes(monkeypatch):
+    """With loose passes in play (here ``pass_tolerance`` 0.5 on the direct path) an increment
+    that fails after its first pass is tried once more with every pass to ``newton_tol``
+    (``loose=False``), logged, before any cut-back; one that fails in its first pass, or
+    without loose passes, is cut back at once."""
+    import cgfem.solve.static as static
+    from dataclasses import replace
+    from cgfem.case.model import SolverOptions
+    from cgfem.solve.outer import Increment, IncrementFailure
+    from cgfem.solve.policy import SolverPolicy
+
+    calls, failing = [], {"pass": 3}
+
+    def increment(system, solves, u, stress, t, options, log, guess=None, loose=True):
+        calls.append((t, loose))
+        if loose:
+            return IncrementFailure("line_search", failing["pass"], 1e-3, 3)
+        return Increment(u, stress, stress, [[1.0, 0.0]], [0.0], True)
+
+    monkeypatch.setattr(static, "solve_increment", increment)
+    lines: list[str] = []
+    loose = _OneDof(replace(SolverPolicy(), pass_tolerance=0.5))
+    result = static.solve_static(loose, 1, SolverOptions(max_cutbacks=2), log=lines.append)
+    assert result.status == "converged" and calls == [(1.0, True), (1.0, False)]
+    assert any("outer pass 3" in line and "again with every outer pass solved to newton_tol" in line
+               for line in lines)
+    # a failure in the first pass is cut back at once
+    calls.clear()
+    failing["pass"] = 1
+    assert static.solve_static(loose, 1, SolverOptions(max_cutbacks=0)).status == "failed"
+    assert calls == [(1.0, True)]
+    # and so is any failure without loose passes
+    calls.clear()
+    failing["pass"] = 3
+    assert static.solve_static(_OneDof(), 1, SolverOptions(max_cutbacks=0)).status == "failed"
+    assert calls == [(1.0, True)]

@@ -213,14 +213,26 @@ def accelerator(policy) -> Relaxation | Anderson:
     return Relaxation(policy.acceleration == "aitken")
 
 
+def pass_tolerance(policy, solves, loose: bool = True) -> float:
+    """The fraction of its first residual at which Newton may stop in an outer pass that is
+    not the last: ``policy.pass_tolerance`` on the direct path, ``krylov_pass_tolerance`` on
+    the Krylov path, where a later pass cannot use modified Newton's cheap solves and loose
+    passes save whole Newton iterations (docs/methods/elasticity.md, "Loose passes"); 0 (every
+    pass to ``newton_tol``) unless ``loose``."""
+    if not loose:
+        return 0.0
+    return policy.pass_tolerance if solves.factorizes else policy.krylov_pass_tolerance
+
+
 def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray | None], t: float,
-                    options: SolverOptions, log: Log, start: np.ndarray | None = None
+                    options: SolverOptions, log: Log, start: np.ndarray | None = None, loose: bool = True
                     ) -> Increment | IncrementFailure:
     """The outer loop at load factor ``t`` from the unknowns ``u0`` and the recovery
     ``recovered0`` of the previous step (module docstring): an :class:`Increment`, or an
     :class:`IncrementFailure` when Newton fails. ``solves``: the linear solves
     (:class:`~cgfem.solve.solves.LinearSolves`); ``start``: the unknowns the first pass
-    starts from (a predictor), ``u0`` if None."""
+    starts from (a predictor), ``u0`` if None; ``loose``: passes that are not the last may
+    stop early (:func:`pass_tolerance`)."""
     policy = system.policy
     u, frozen, recovered = u0, list(recovered0), list(recovered0)
     changes: list[float] = []
@@ -240,13 +252,11 @@ def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray 
     first = 0.0           # Newton's reference in the first pass
     if start is not None:
         u = start
-    # a pass that is not the last needs Newton only to a fraction of its first residual: on
-    # the Krylov path, where a later pass cannot use modified Newton's cheap solves, that
-    # saves whole Newton iterations (docs/methods/elasticity.md, "Loose passes")
-    pass_tolerance = policy.pass_tolerance if solves.factorizes else policy.krylov_pass_tolerance
+    # a pass that is not the last needs Newton only to a fraction of its first residual
+    loose_fraction = pass_tolerance(policy, solves, loose)
     forces_from = options.outer_tol * (1.0 if solves.factorizes else LAST_PASSES)
     for outer in range(1, options.outer_passes + 1):
-        loose = pass_tolerance if (outer == 1 or changes[-1] > LAST_PASSES * options.outer_tol) else 0.0
+        stop_at = loose_fraction if (outer == 1 or changes[-1] > LAST_PASSES * options.outer_tol) else 0.0
         frozen = following
         system.freeze(frozen)
         if contact:
@@ -270,7 +280,7 @@ def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray 
                 return newton(assemble, start, solves, tol=options.newton_tol, reference=reference,
                               max_iter=policy.modified_newton_iterations if fixed_tangent else options.max_newton,
                               fixed_tangent=fixed_tangent, limit=limit, forcing=policy.forcing,
-                              forcing_max=0.0 if solves.factorizes else policy.forcing_max, loose=loose,
+                              forcing_max=0.0 if solves.factorizes else policy.forcing_max, loose=stop_at,
                               log=lambda k, r, note: log(f"t={t:.4g} pass {outer} newton {k}: |r|/ref={r:.3e}  "
                                                          f"({time.perf_counter() - tic:.2f} s"
                                                          f"{'; ' + note if note else ''})"))

@@ -9,7 +9,9 @@ recovery accelerated (:mod:`cgfem.solve.outer`). ``outer_passes`` is only a
 cap: a step that reaches it above ``outer_tol`` (or with contact not settled) is kept but
 marked ``outer_converged = False`` (and the run's status says so, see :class:`StaticResult`).
 When Newton fails, or two outer passes repeat a state with held contact points against their
-rule (:data:`~cgfem.solve.outer.UNSETTLED`), the increment is halved (at most
+rule (:data:`~cgfem.solve.outer.UNSETTLED`), after a first pass and with loose passes
+(:func:`~cgfem.solve.outer.pass_tolerance`, the Krylov path's), the increment is tried again
+with every pass solved to ``newton_tol``; if it fails again, or failed otherwise, it is halved (at most
 ``max_cutbacks`` times per step, :class:`StepControl`) and the step is reached in several
 sub-steps; if it still fails, the run stops with status ``failed`` and keeps every converged
 step. The system, its items and
@@ -26,7 +28,7 @@ from typing import Callable
 import numpy as np
 
 from cgfem.case.model import SolverOptions
-from cgfem.solve.outer import IncrementFailure, Log, solve_increment
+from cgfem.solve.outer import IncrementFailure, Log, pass_tolerance, solve_increment
 from cgfem.solve.solves import LinearSolves
 from cgfem.solve.system import System
 
@@ -144,6 +146,12 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
         start = time.perf_counter()
         guess = predict(system.policy.predictor, t, u, last, t_new)
         outcome = solve_increment(system, solves, u, recovered, t_new, options, log, guess)
+        if isinstance(outcome, IncrementFailure) and outcome.outer_pass > 1 \
+                and pass_tolerance(system.policy, solves) > 0.0:
+            # a pass that starts where a loose one stopped may find no descent on a contact
+            # residual that kinks there (faceted surfaces): the increment again, every pass tight
+            log(f"t={t_new:.4g}: {outcome}; again with every outer pass solved to newton_tol")
+            outcome = solve_increment(system, solves, u, recovered, t_new, options, log, guess, loose=False)
         if isinstance(outcome, IncrementFailure):
             if not control.cut_back():
                 return StaticResult(FAILED, records, f"no convergence at load factor {t_new:.6g} "
