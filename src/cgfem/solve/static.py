@@ -9,12 +9,12 @@ recovery accelerated (:mod:`cgfem.solve.outer`). ``outer_passes`` is only a
 cap: a step that reaches it above ``outer_tol`` (or with contact not settled) is kept but
 marked ``outer_converged = False`` (and the run's status says so, see :class:`StaticResult`).
 When Newton fails, or two outer passes repeat a state with held contact points against their
-rule (:data:`~cgfem.solve.outer.UNSETTLED`), after a first pass and with loose passes
-(:func:`~cgfem.solve.outer.pass_tolerance`, the Krylov path's), the increment is tried again
-with every pass solved to ``newton_tol``; if it fails again, or failed otherwise, it is halved (at most
+rule (:data:`~cgfem.solve.outer.UNSETTLED`), the increment is halved (at most
 ``max_cutbacks`` times per step, :class:`StepControl`) and the step is reached in several
 sub-steps; if it still fails, the run stops with status ``failed`` and keeps every converged
-step. The system, its items and
+step. An increment that fails after its first pass while loose passes are in play
+(:func:`~cgfem.solve.outer.pass_tolerance`: the Krylov path's) is first solved once more from
+the same state with every pass to ``newton_tol``. The system, its items and
 its collaborators are in :mod:`cgfem.solve.system`; the tuning constants in
 :class:`~cgfem.solve.policy.SolverPolicy`, which the system carries.
 """
