@@ -12,6 +12,8 @@ assembly) and the contact pairs' (:meth:`cgfem.contact.assembly.ContactSet.add`)
   pass from where the last one ended): seconds, and the ratio of a linear solve to an
   assembly of the bodies' tangents, the figure issue 33 bounds by 3 ("the linear solve per
   Newton iteration at most 3x the bulk assembly of that iteration");
+- on the Krylov path, the preconditioner builds (count, seconds, within the solves) and the
+  Krylov iterations of all solves;
 - the share of the solve phase in the solves, the bulk and contact assemblies, and the rest
   (recovery, search outside assemblies, line-search residuals without tangent, output).
 
@@ -65,7 +67,8 @@ class Timer:
         setattr(owner, attribute, timed)
 
 
-def measure(case_path: Path, level: int, surface: str, order: int, krylov_min_dofs: int | None) -> dict:
+def measure(case_path: Path, level: int, surface: str, order: int, krylov_min_dofs: int | None,
+            refresh_rate: float | None = None) -> dict:
     """One run of ``case_path`` with the timers; the figures printed by :func:`main`."""
     from cgfem.case import parse_case, parse_yaml
     from cgfem.contact.assembly import ContactSet
@@ -78,13 +81,24 @@ def measure(case_path: Path, level: int, surface: str, order: int, krylov_min_do
 
     timer = Timer()
     timer.wrap(LinearSolves, "__call__", "solve")
+    timer.wrap(LinearSolves, "_refresh", "preconditioner")
+    krylov_iterations = [0]
+    original_krylov = LinearSolves._krylov
+
+    def counted(self, *args, **kwargs):
+        x = original_krylov(self, *args, **kwargs)
+        krylov_iterations[0] += self.history[-1][1]
+        return x
+    LinearSolves._krylov = counted
     # one system assembly with tangent: every body's add (summed) and the contact set's
     timer.wrap(System, "assemble", "assembly", lambda self, u, t, tangent: tangent)
     timer.wrap(BodyItem, "add", "bulk", lambda self, u, t, r, tangent: tangent)
     timer.wrap(ContactSet, "add", "contact", lambda self, u, r, tangent, update=True: tangent)
     policy = DEFAULT_POLICY if krylov_min_dofs is None else \
-        dataclasses.replace(DEFAULT_POLICY, krylov_min_dofs=krylov_min_dofs,
+        dataclasses.replace(DEFAULT_POLICY, krylov_min_dofs=krylov_min_dofs, krylov_order2_min_dofs=krylov_min_dofs,
                             krylov_floating_min_dofs=krylov_min_dofs, krylov_saddle_min_dofs=krylov_min_dofs)
+    if refresh_rate is not None:
+        policy = dataclasses.replace(policy, krylov_refresh_rate=refresh_rate)
     case = parse_case(parse_yaml(case_path.read_text()), case_path.parent)
     with tempfile.TemporaryDirectory() as folder:
         tic = time.perf_counter()
@@ -104,7 +118,8 @@ def measure(case_path: Path, level: int, surface: str, order: int, krylov_min_do
             "build_s": summary["timings"]["build_s"], "solve_phase_s": summary["timings"]["solve_s"],
             "peak_gib": status_kib("VmHWM") / 2**20, "seconds": timer.seconds, "calls": timer.calls,
             "reactions": summary["steps"][-1]["reactions"] if summary["steps"] else {},
-            "solve_per_s": solve_per, "bulk_per_s": bulk_per, "bulk_tangents": fresh,
+            "krylov_iterations": krylov_iterations[0], "solve_per_s": solve_per, "bulk_per_s": bulk_per,
+            "bulk_tangents": fresh,
             "ratio": solve_per / bulk_per if bulk_per > 0.0 else float("nan")}
 
 
@@ -118,6 +133,8 @@ def report(row: dict) -> str:
         f"{row['newton']} Newton iterations, {row['passes']} outer passes, wall {row['wall_s']:.1f} s "
         f"(build {row['build_s']:.1f} s, solve {phase:.1f} s), peak {row['peak_gib']:.2f} GiB",
         f"  linear solves:        {c.get('solve', 0):5d} x {row['solve_per_s']:.3f} s = {s.get('solve', 0.0):8.1f} s",
+        f"  of which preconditioner builds: {c.get('preconditioner', 0)} taking {s.get('preconditioner', 0.0):.1f} s; "
+        f"Krylov iterations {row['krylov_iterations']}",
         f"  tangent assemblies:   {c.get('assembly', 0):5d} x "
         f"{s.get('assembly', 0.0) / max(1, c.get('assembly', 0)):.3f} s = {s.get('assembly', 0.0):8.1f} s "
         f"(contact {s.get('contact', 0.0):.1f} s)",
@@ -138,10 +155,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--surface", default="nurbs_fe")
     parser.add_argument("--order", type=int, default=1)
     parser.add_argument("--krylov-min-dofs", type=int, default=None,
-                        help="the Krylov path's thresholds, saddle points' too (default the policy's); 0 forces it")
+                        help="the Krylov path's thresholds, every order's, floating bodies' and saddle points' "
+                             "too (default the policy's); 0 forces it")
+    parser.add_argument("--krylov-refresh-rate", type=float, default=None,
+                        help="the policy's krylov_refresh_rate (default the policy's); 0: rebuild the "
+                             "preconditioner past krylov_refresh iterations alone")
     parser.add_argument("--json", type=Path, help="write the figures to this file")
     args = parser.parse_args(argv)
-    row = measure(args.case, args.level, args.surface, args.order, args.krylov_min_dofs)
+    row = measure(args.case, args.level, args.surface, args.order, args.krylov_min_dofs, args.krylov_refresh_rate)
     print(report(row))
     if args.json:
         args.json.write_text(json.dumps(row, indent=1))

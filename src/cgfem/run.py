@@ -118,7 +118,7 @@ def estimate_memory(case: Case, level: int, measures: dict[str, tuple[float, flo
         total += ORDER_MEMORY[order] * (BYTES_PER_ELEMENT * inside + BYTES_PER_CUT_ELEMENT * cut)
         dofs += int(3 * order**3 * (inside + cut))
     fitted = surface_definition(surface).fitted
-    krylov = solve_path(case.solver.linear, dofs, policy, fitted, case.held_by_contact_alone) == KRYLOV
+    krylov = solve_path(case.solver.linear, dofs, policy, fitted, case.held_by_contact_alone, order) == KRYLOV
     if krylov and not fitted:
         total *= (KRYLOV_MEMORY if case.contact else KRYLOV_MEMORY_NO_CONTACT)[order]
     return int(total), dofs, krylov

@@ -226,7 +226,7 @@ class _OneDof:
     """A system of one unknown for the load-step control's tests, whose increments are
     scripted (``solve_increment`` replaced): the attributes the linear solves ask for."""
 
-    n_dofs, symmetric, indefinite, bodies = 1, True, False, [None]
+    n_dofs, symmetric, indefinite, bodies, order = 1, True, False, [None], 1
 
     def __init__(self, policy=None):
         from cgfem.solve.policy import SolverPolicy

@@ -58,7 +58,8 @@ CRUSH = textwrap.dedent("""\
 
 
 #: a policy under which every system takes the direct path
-DIRECT_ONLY = replace(DEFAULT_POLICY, krylov_min_dofs=10**9, krylov_saddle_min_dofs=10**9)
+DIRECT_ONLY = replace(DEFAULT_POLICY, krylov_min_dofs=10**9, krylov_order2_min_dofs=10**9,
+                      krylov_saddle_min_dofs=10**9)
 
 def _write(tmp_path, text, name="case.yaml"):
     path = tmp_path / name
@@ -200,6 +201,24 @@ def test_a_body_held_by_contact_alone_keeps_the_direct_path_longer():
     assert policy.krylov_min_dofs <= dofs < policy.krylov_floating_min_dofs and krylov
     _, dofs, krylov = estimate_memory(chain3, 2, measures, policy=policy)
     assert policy.krylov_min_dofs <= dofs < policy.krylov_floating_min_dofs and not krylov
+
+
+def test_triquadratic_systems_take_the_krylov_path_from_their_own_threshold():
+    """``krylov_order2_min_dofs`` (20k) is below ``krylov_min_dofs`` (100k): chain2_steel with
+    triquadratic elements at level 1 (about 37k unknowns) takes the Krylov path, with
+    trilinear ones at level 2 (about 29k) the direct one; chain3, whose middle link is held by
+    contact alone, keeps the direct path at order 2, level 1 (about 72k)."""
+    from cgfem.case import load_case
+    from cgfem.run import estimate_memory
+    measures = {name: (4.93e-6, 2.13e-3) for name in ("link_a", "link_b", "link_c")}
+    steel, chain3 = (load_case(CASES / f"{name}.yaml") for name in ("chain2_steel", "chain3"))
+    low, high = DEFAULT_POLICY.krylov_order2_min_dofs, DEFAULT_POLICY.krylov_min_dofs
+    _, dofs, krylov = estimate_memory(steel, 2, measures, 1)
+    assert low <= dofs < high and not krylov
+    _, dofs, krylov = estimate_memory(steel, 1, measures, 2)
+    assert low <= dofs < high and krylov
+    _, dofs, krylov = estimate_memory(chain3, 1, measures, 2)
+    assert low <= dofs < DEFAULT_POLICY.krylov_floating_min_dofs and not krylov
 
 
 def test_memory_estimate_without_contact_lets_the_bent_half_torus_run_order_2_at_level_3():

@@ -95,16 +95,41 @@ def test_preconditioner_is_kept_for_the_next_matrix(symmetric):
     assert residual <= 1e-4 and solves.history[-1][1] < solves.history[-2][1]
 
 
-def test_slow_solve_refreshes_the_preconditioner():
-    """A kept preconditioner that needs more than ``krylov_refresh`` iterations is rebuilt on
-    the current matrix and the solve goes on from where it got."""
+@pytest.mark.parametrize("rate", [0.0, 1.5])
+def test_slow_solve_refreshes_the_preconditioner(rate):
+    """A kept preconditioner whose solve needs more than :meth:`LinearSolves.kept_limit`
+    iterations is rebuilt on the current matrix and the solve goes on from where it got. The
+    limit is ``krylov_refresh`` (here 3) or, with ``krylov_refresh_rate``, that factor times
+    the fresh solve's iterations per decade of residual times the decades asked for."""
     K0, b, B = two_bodies(True, 1.0)
     K1, _, _ = two_bodies(True, 30.0, seed=1)        # a far stiffer contact block
-    solves = LinearSolves("auto", B, True, policy=policy(krylov_refresh=3))
+    solves = LinearSolves("auto", B, True, policy=policy(krylov_refresh=3, krylov_refresh_rate=rate))
     solves(K0, b)
+    fresh = solves.history[-1][1]
+    res = np.linalg.norm(K0 @ solves(K0, b) - b) / np.linalg.norm(b)   # the same matrix: kept
+    assert solves.history[-1][2] == "kept"
+    limit = solves.kept_limit(1e-10)
+    if rate == 0.0:
+        assert limit == 3
+    else:   # the fresh solve reached at most 1e-10 (its own residual): at least 10 decades
+        assert 3 < limit <= int(np.ceil(rate * fresh))
     x = solves(K1, b)
-    assert solves.history[-1][2].startswith("refreshed after 3")
-    assert np.linalg.norm(K1 @ x - b) <= 1e-10 * np.linalg.norm(b)
+    assert solves.history[-1][2] == f"refreshed after {limit}"
+    assert np.linalg.norm(K1 @ x - b) <= 1e-10 * np.linalg.norm(b) and res <= 1e-10
+
+
+def test_preconditioner_kept_while_it_converges_at_its_fresh_rate():
+    """A kept preconditioner that needs more than ``krylov_refresh`` iterations but no more
+    than ``krylov_refresh_rate`` times its fresh rate (contact 20 % stiffer: 35 iterations
+    against 31 fresh) is kept; without the rate it is rebuilt."""
+    K0, b, B = two_bodies(True, 1.0)
+    K1, _, _ = two_bodies(True, 1.2, seed=1)
+    for rate, note in [(1.5, "kept"), (0.0, "refreshed after 3")]:
+        solves = LinearSolves("auto", B, True, policy=policy(krylov_refresh=3, krylov_refresh_rate=rate))
+        solves(K0, b)
+        x = solves(K1, b)
+        assert solves.history[-1][2] == note and solves.history[-1][1] > 3
+        assert np.linalg.norm(K1 @ x - b) <= 1e-10 * np.linalg.norm(b)
 
 
 def test_stalled_solve_falls_back_to_a_factorization():
@@ -138,6 +163,12 @@ def test_direct_below_the_size_thresholds_and_for_saddle_points_not_given():
     # a direct-only policy stays direct for a floating body below its own threshold
     given = replace(SolverPolicy(), krylov_min_dofs=n + 1, krylov_floating_min_dofs=0)
     assert LinearSolves("auto", B, policy=given, floating=True).path(n) == DIRECT
+    # triquadratic elements have their own threshold; a floating body's adds to it
+    given = replace(SolverPolicy(), krylov_min_dofs=n + 1, krylov_order2_min_dofs=n, krylov_floating_min_dofs=0)
+    assert LinearSolves("auto", B, policy=given, order=2).path(n) == KRYLOV
+    assert LinearSolves("auto", B, policy=given, order=1).path(n) == DIRECT
+    given = replace(given, krylov_floating_min_dofs=n + 1)
+    assert LinearSolves("auto", B, policy=given, order=2, floating=True).path(n) == DIRECT
     assert LinearSolves("auto", B, indefinite=True, policy=policy()).path(n) == DIRECT
     saddle = (n, [])
     for least, path in ((n, KRYLOV), (n + 1, DIRECT)):

@@ -74,9 +74,11 @@ class SolverPolicy:
 
     Linear solves (:class:`~cgfem.solve.solves.LinearSolves`)
     ----------------------------------------------------------
-    krylov_min_dofs : ``linear: auto`` solves a system of at least this many unknowns by the
-        preconditioned Krylov path, smaller ones by the direct path
+    krylov_min_dofs : ``linear: auto`` solves a system of trilinear elements of at least this
+        many unknowns by the preconditioned Krylov path, smaller ones by the direct path
         (:mod:`cgfem.solve.backends`).
+    krylov_order2_min_dofs : the same for triquadratic elements, whose 27-node couplings give
+        about four times the nonzeros per unknown and factorizations that fill far more.
     krylov_floating_min_dofs : the further threshold, besides ``krylov_min_dofs``, of a system
         with a body held by contact alone (no displacement conditions of its own: chain3's
         middle link), whose Newton solves the Krylov path takes several times longer (more
@@ -86,7 +88,10 @@ class SolverPolicy:
         factorized whole up to ``SADDLE_DIRECT_DOFS``, above it reduced with a factorized
         preconditioner rebuilt for every matrix).
     krylov_refresh : a Krylov solve that needs more than this many iterations with a kept
-        preconditioner is repeated with a preconditioner of the current matrix.
+        preconditioner is repeated with a preconditioner of the current matrix ...
+    krylov_refresh_rate : ... unless the last solve with a fresh preconditioner needed more:
+        the limit is then this factor times its iterations per decade of residual times the
+        decades the solve asks for (0: ``krylov_refresh`` alone).
     krylov_max_iterations : iterations after which a Krylov solve with a fresh
         preconditioner is stalled: the system is then factorized directly (logged).
     krylov_rtol : the tightest relative residual a Krylov solve is asked for (inexact Newton
@@ -112,9 +117,11 @@ class SolverPolicy:
     rotation_stretch: float = 1.0
     onset_penetration: float = 0.1
     krylov_min_dofs: int = 100_000
+    krylov_order2_min_dofs: int = 20_000
     krylov_floating_min_dofs: int = 100_000
     krylov_saddle_min_dofs: int = 40_000
     krylov_refresh: int = 40
+    krylov_refresh_rate: float = 1.5
     krylov_max_iterations: int = 400
     krylov_rtol: float = 1e-10
 

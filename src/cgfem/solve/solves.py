@@ -7,13 +7,16 @@
   once per matrix and kept while Newton passes the same matrix object (or, in modified
   Newton, while ``frozen``);
 - **krylov** (``linear: auto`` on a system of at least ``policy.krylov_min_dofs`` unknowns,
+  ``policy.krylov_order2_min_dofs`` with triquadratic elements,
   ``policy.krylov_floating_min_dofs`` with a body held by contact alone, a saddle point of at
   least ``policy.krylov_saddle_min_dofs``): CG or GMRES preconditioned by
   smoothed-aggregation AMG with the rigid-body modes (:mod:`cgfem.solve.krylov`); a saddle
   point (``nurbs_fit``) is solved on the bodies' dofs with the AMG of its reduced matrix
   (:mod:`cgfem.solve.saddle`). The preconditioner is kept across Newton
-  iterations, outer passes and load steps while a solve with it needs at most
-  ``policy.krylov_refresh`` iterations; past that the solve is repeated with a preconditioner
+  iterations, outer passes and load steps while a solve with it converges in at most
+  :meth:`LinearSolves.kept_limit` iterations (``policy.krylov_refresh``, or more when a fresh
+  preconditioner needed more per decade of residual: the elements of order 2); past that
+  the solve is repeated with a preconditioner
   of the current matrix, and a solve that stalls even then (``policy.krylov_max_iterations``)
   falls back to a factorization of that matrix (a saddle point's reduced one). The tolerance is inexact Newton's
   (:func:`cgfem.solve.newton.forcing_rtol`), never tighter than ``policy.krylov_rtol``.
@@ -41,15 +44,18 @@ DIRECT, KRYLOV = "direct", "krylov"
 
 
 def solve_path(backend: str, n: int, policy: SolverPolicy = DEFAULT_POLICY, saddle: bool = False,
-               floating: bool = False) -> str:
+               floating: bool = False, order: int = 1) -> str:
     """:data:`KRYLOV` for ``auto`` on a ``saddle`` point (``nurbs_fit``'s, reduced to the
     bodies' dofs) of at least ``policy.krylov_saddle_min_dofs`` unknowns, on any other of at
-    least ``policy.krylov_min_dofs`` and, with a body held by contact alone (``floating``), of
-    at least ``policy.krylov_floating_min_dofs`` too; else :data:`DIRECT`."""
+    least ``policy.krylov_min_dofs`` (elements of ``order`` 1) or
+    ``policy.krylov_order2_min_dofs`` (``order`` 2) and, with a body held by contact alone
+    (``floating``), of at least ``policy.krylov_floating_min_dofs`` too; else
+    :data:`DIRECT`."""
     if saddle:
         least = policy.krylov_saddle_min_dofs
     else:
-        least = max(policy.krylov_min_dofs, policy.krylov_floating_min_dofs if floating else 0)
+        least = policy.krylov_min_dofs if order == 1 else policy.krylov_order2_min_dofs
+        least = max(least, policy.krylov_floating_min_dofs if floating else 0)
     return KRYLOV if backend == "auto" and n >= least else DIRECT
 
 
@@ -58,16 +64,16 @@ class LinearSolves:
 
     ``backend``: the case's ``solver.linear`` (``auto`` or a backend name); ``near_null``
     (n, k): the rigid-body modes of every body (AMG); ``symmetric``, ``indefinite`` (a saddle
-    point), ``saddle``, ``floating`` (a body held by contact alone): the system's structure
-    (:class:`~cgfem.solve.system.System`).
+    point), ``saddle``, ``floating`` (a body held by contact alone), ``order`` (the elements'):
+    the system's structure (:class:`~cgfem.solve.system.System`).
     Failures raise :class:`~cgfem.solve.linear.LinearSolverError`, which Newton reports."""
 
     def __init__(self, backend: str, near_null: np.ndarray, symmetric: bool = True, indefinite: bool = False,
                  saddle: tuple | None = None, policy: SolverPolicy = DEFAULT_POLICY,
-                 log: Callable[[str], None] | None = None, floating: bool = False):
+                 log: Callable[[str], None] | None = None, floating: bool = False, order: int = 1):
         self.backend, self.near_null, self.symmetric = backend, near_null, symmetric
         self.indefinite, self.saddle, self.policy = indefinite, saddle, policy
-        self.floating = floating
+        self.floating, self.order = floating, order
         self.log = log or (lambda message: None)
         self._key, self._factor = None, None
         #: modified Newton: the last setup serves for a new matrix (or for None)
@@ -75,6 +81,8 @@ class LinearSolves:
         #: the Krylov path's kept preconditioner, and whether it was built on the current matrix
         self._amg: AMGPreconditioner | ReducedSaddleSolver | None = None
         self._fresh = False
+        #: iterations per decade of residual of the last solve with a fresh preconditioner
+        self._per_decade: float | None = None
         self._logged = False
         self._n = None
         #: per solve: (path, iterations, what happened) for the benchmarks and the tests
@@ -86,7 +94,7 @@ class LinearSolves:
         that backend cannot solve them."""
         choose_backend(system.n_dofs, system.symmetric, backend, system.indefinite)
         solves = cls(backend, system.near_null(), system.symmetric, system.indefinite, system.saddle(),
-                     system.policy, log, system.held_by_contact_alone())
+                     system.policy, log, system.held_by_contact_alone(), system.order)
         solves._n = system.n_dofs
         return solves
 
@@ -102,7 +110,7 @@ class LinearSolves:
         constraints are not given is factorized whole (:data:`DIRECT`)."""
         if self.indefinite and self.saddle is None:
             return DIRECT
-        return solve_path(self.backend, n, self.policy, self.indefinite, self.floating)
+        return solve_path(self.backend, n, self.policy, self.indefinite, self.floating, self.order)
 
     def __call__(self, K: sp.csr_matrix | None, b: np.ndarray, rtol: float | None = None) -> np.ndarray:
         """The solution of ``K x = b``; ``rtol``: the relative residual an iterative solve may
@@ -140,14 +148,18 @@ class LinearSolves:
             if self._amg is None:
                 self._refresh(K)
                 note = "new"
+            fresh = self._fresh
             x, its, res, ok = self._amg.krylov(K, b, target,
-                                               p.krylov_max_iterations if self._fresh else p.krylov_refresh)
+                                               p.krylov_max_iterations if fresh else self.kept_limit(target))
             total = its
-            if not ok and not self._fresh:
+            if not ok and not fresh:
                 self._refresh(K)
                 note = f"refreshed after {its}"
                 x, its, res, ok = self._amg.krylov(K, b, target, p.krylov_max_iterations, x0=x)
                 total += its
+                fresh = True
+            if ok and fresh and 0.0 < res < 1.0 and its > 0:
+                self._per_decade = its / np.log10(1.0 / res)
         except LinearSolverError as err:      # a breakdown (an indefinite matrix for CG), NaN
             self._amg, ok = None, False
             note = str(err)
@@ -167,6 +179,18 @@ class LinearSolves:
         self.log(f"linear: {kind} stalled at {res:.1e} after {total} iterations (target {target:.1e}; {note}); "
                  f"fell back to {self._factor.backend} for this matrix")
         return self._factor.solve(b)
+
+    def kept_limit(self, target: float) -> int:
+        """The iterations a solve to the relative residual ``target`` may take with a kept
+        preconditioner before it is rebuilt: ``policy.krylov_refresh``, or
+        ``policy.krylov_refresh_rate`` times the iterations per decade of residual of the last
+        solve with a fresh preconditioner times the decades ``target`` asks for, whichever is
+        more."""
+        p = self.policy
+        if self._per_decade is None or not 0.0 < target < 1.0:
+            return p.krylov_refresh
+        rated = int(np.ceil(p.krylov_refresh_rate * self._per_decade * np.log10(1.0 / target)))
+        return max(p.krylov_refresh, rated)
 
     def _refresh(self, K: sp.csr_matrix) -> None:
         """A preconditioner of ``K``, kept for the matrices that follow: AMG of ``K``, or of a

@@ -236,6 +236,11 @@ class System:
             FitConstraint(b.z, b.mu, self.offsets[b.body] + np.arange(self.bodies[b.body].n_dofs), b.fit.M, b.fit.G,
                           b.fit.factor.solve, b.scale) for b in blocks]
 
+    @property
+    def order(self) -> int:
+        """The highest element order of the bodies (1 trilinear, 2 triquadratic)."""
+        return max(b.space.element.order for b in self.bodies)
+
     def held_by_contact_alone(self) -> bool:
         """Whether a body has no displacement conditions of its own (with contact: held by
         contact alone, every rigid motion free until contact closes)."""
