@@ -12,7 +12,7 @@ import scipy.sparse as sp
 
 from tests.support import elasticity_fixture as fx
 from cgfem.solve.krylov import AMGPreconditioner, krylov_solve
-from cgfem.solve.linear import rigid_body_modes, smoothed_aggregation, v_cycle
+from cgfem.solve.linear import mode_bodies, rigid_body_modes, smoothed_aggregation, v_cycle
 from cgfem.solve.policy import SolverPolicy
 from cgfem.solve.solves import DIRECT, KRYLOV, LinearSolves
 
@@ -75,6 +75,24 @@ def test_amg_krylov_solves_a_body_held_by_contact(symmetric):
     # rotations are not caught: more iterations (26 against 40 measured, symmetric; 26 and 43)
     _, its_plain, _, _ = krylov_solve(K, b, AMGPreconditioner(K, None, symmetric), 1e-10, 200, symmetric)
     assert its_plain > 1.25 * its
+
+
+def test_finest_aggregates_lie_within_one_body():
+    """With the bodies' labels (from the blocks of the rigid-body modes) no aggregate of the
+    finest level joins nodes of the two cubes; on pyamg's own strength, where the contact
+    springs count as couplings, some do (9 of 45 here)."""
+    K, _, B = two_bodies(True, 1.0)
+    As = sp.csr_matrix(K).tobsr(blocksize=(3, 3))
+    bodies = mode_bodies(B)[::3]
+    assert set(bodies) == {0, 1}
+
+    def mixed(**kwargs) -> int:
+        ml = smoothed_aggregation(As, B=B, keep=True, improve_candidates=None, **kwargs)
+        agg = ml.levels[0].AggOp.tocsc()
+        return sum(np.unique(bodies[agg.indices[agg.indptr[j]:agg.indptr[j + 1]]]).size > 1
+                   for j in range(agg.shape[1]))
+    assert mixed(bodies=bodies) == 0
+    assert mixed() > 0
 
 
 @pytest.mark.parametrize("symmetric", [True, False])

@@ -24,7 +24,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from cgfem.solve.linear import LinearSolverError, scale_symmetric, smoothed_aggregation, v_cycle
+from cgfem.solve.linear import (LinearSolverError, mode_bodies, scale_symmetric, smoothed_aggregation,
+                                v_cycle)
 
 #: inner iterations of one GMRES cycle
 RESTART = 50
@@ -32,14 +33,12 @@ RESTART = 50
 
 def collapse_modes(B: np.ndarray) -> np.ndarray:
     """The rigid-body modes of several bodies, ``B`` (n, 6 k) block by block (each row
-    nonzero in one group of six columns at most), summed into six columns (n, 6): every
-    aggregate lies in one body, where both span the same motions, and the coarse blocks are
-    6x6 instead of 6k x 6k. Other shapes are returned as they are."""
+    nonzero in one group of six columns at most, :func:`~cgfem.solve.linear.mode_bodies`), summed into six
+    columns (n, 6): on an aggregate that lies in one body (every one of the finest level,
+    :class:`AMGPreconditioner`) both span the same motions, and the coarse blocks are 6x6
+    instead of 6k x 6k. Other shapes are returned as they are."""
     n, k = B.shape
-    if k % 6 or k == 6:
-        return B
-    groups = np.abs(B).reshape(n, k // 6, 6).max(axis=2) > 0.0
-    if np.any(groups.sum(axis=1) > 1):
+    if k == 6 or mode_bodies(B) is None:
         return B
     return B.reshape(n, k // 6, 6).sum(axis=1)
 
@@ -47,9 +46,10 @@ def collapse_modes(B: np.ndarray) -> np.ndarray:
 class AMGPreconditioner:
     """One V-cycle of smoothed aggregation on ``A`` (n, n), scaled: ``z = s * V(s * r)``
     with ``s = |diag A|^-1/2``. ``near_null`` (n, 6 k): the rigid-body modes of the bodies
-    (zero rows allowed; :func:`collapse_modes`); ``symmetric``: the hierarchy's restriction is ``P^T`` (CG) or built
-    for a non-symmetric ``A`` (GMRES). ``info``: ``setup_s``, ``levels``,
-    ``operator_complexity``."""
+    (zero rows allowed; :func:`collapse_modes`), whose blocks also keep every aggregate of the
+    finest level within one body (:func:`~cgfem.solve.linear.strength_within_bodies`);
+    ``symmetric``: the hierarchy's restriction is ``P^T`` (CG) or built for a non-symmetric
+    ``A`` (GMRES). ``info``: ``setup_s``, ``levels``, ``operator_complexity``."""
 
     def __init__(self, A: sp.csr_matrix, near_null: np.ndarray | None, symmetric: bool):
         tic = time.perf_counter()
@@ -63,9 +63,13 @@ class AMGPreconditioner:
         if symmetric:
             As = (0.5 * (As + As.T)).tocsr()
         B = None if near_null is None else collapse_modes(np.asarray(near_null, float)) / self._s[:, None]
+        bodies = None if near_null is None else mode_bodies(np.asarray(near_null, float))
         if self.n % 3 == 0:
             As = As.tobsr(blocksize=(3, 3))
+            bodies = None if bodies is None else bodies[::3]
         kwargs = {"improve_candidates": None} if B is not None else {}
+        if bodies is not None:      # every aggregate of the finest level in one body
+            kwargs["bodies"] = bodies
         # one forward block Gauss-Seidel sweep before the coarse correction and one backward
         # after it (a symmetric V-cycle for CG): pyamg's default symmetric sweeps on both
         # sides cost a third more per GMRES solve for the same iterations within 20 %

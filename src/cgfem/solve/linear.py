@@ -48,11 +48,14 @@ GMRES_RESTART = 50
 AMG_SEED = 2026
 
 
-def smoothed_aggregation(A: sp.spmatrix, pre: str = "symmetric", post: str = "symmetric", **kwargs: Any):
+def smoothed_aggregation(A: sp.spmatrix, pre: str = "symmetric", post: str = "symmetric",
+                         bodies: np.ndarray | None = None, **kwargs: Any):
     """pyamg's smoothed-aggregation hierarchy of ``A`` (``kwargs`` as
     ``pyamg.smoothed_aggregation_solver``'s) with block Gauss-Seidel smoothers, ``pre`` and
     ``post`` sweeps (:func:`block_sweeps`; pyamg's default is symmetric on both sides), built
-    with numpy's global generator seeded at :data:`AMG_SEED` and restored afterwards. pyamg's
+    with numpy's global generator seeded at :data:`AMG_SEED` and restored afterwards.
+    ``bodies`` (one label per node of a BSR ``A``, or per row): the finest level's aggregates
+    are kept within one label (:func:`strength_within_bodies`). pyamg's
     spectral-radius estimates (the prolongation smoother's weight on every level) start from a
     random vector of that generator: without the seed two set-ups of the same matrix differ at
     round-off, and so do the Krylov iterates and a run's contact decisions after them. (The
@@ -61,6 +64,8 @@ def smoothed_aggregation(A: sp.spmatrix, pre: str = "symmetric", post: str = "sy
     iterations, so the default stays.)"""
     import pyamg
 
+    if bodies is not None and np.unique(bodies).size > 1:
+        kwargs["strength"] = [("predefined", {"C": strength_within_bodies(A, bodies)}), "symmetric"]
     state = np.random.get_state()
     np.random.seed(AMG_SEED)
     try:
@@ -70,6 +75,27 @@ def smoothed_aggregation(A: sp.spmatrix, pre: str = "symmetric", post: str = "sy
         np.random.set_state(state)
     block_sweeps(ml, pre, post)
     return ml
+
+
+def strength_within_bodies(A: sp.spmatrix, bodies: np.ndarray) -> sp.csr_matrix:
+    """pyamg's default strength of connection of ``A`` (``symmetric``, ``theta = 0``: every
+    coupling; nodal for a BSR matrix) without the couplings between nodes of different
+    ``bodies`` labels (n_nodes,). Aggregated on it, every finest-level aggregate lies in one
+    body, so that each body's rigid-body modes, and nothing that stretches the contact
+    between two bodies, span its coarse functions. On pyamg's own strength, whose aggregates
+    take in the neighbours across a contact zone (its coupling ``kappa E / h`` is as strong as
+    the elements'), the modes of two bodies mixed in one aggregate are neither body's rigid
+    motion: a body held by contact alone then loses its soft motions from the coarse space,
+    and the Krylov solves their convergence (chain3 at level 1 on the Krylov path: 1127 GMRES
+    iterations in 15 solves against 393 in 14)."""
+    from pyamg.strength import symmetric_strength_of_connection
+
+    C = sp.csr_matrix(symmetric_strength_of_connection(A, 0.0))
+    bodies = np.asarray(bodies)
+    rows = np.repeat(np.arange(C.shape[0]), np.diff(C.indptr))
+    C.data[bodies[rows] != bodies[C.indices]] = 0.0
+    C.eliminate_zeros()
+    return C
 
 
 def block_sweeps(ml, pre: str, post: str) -> None:
@@ -169,6 +195,19 @@ def rigid_body_modes(coords: np.ndarray) -> np.ndarray:
     for k in range(3):
         B[:, :, 3 + k] = np.cross(np.eye(3)[k], r)
     return B.reshape(-1, 6)
+
+
+def mode_bodies(B: np.ndarray) -> np.ndarray | None:
+    """The body of every row of ``B`` (n, 6 k), the rigid-body modes of ``k`` bodies block by
+    block: the group of six columns the row is nonzero in (-1 where it is zero in all, the
+    contact set's own unknowns); None if ``B`` is not so made."""
+    n, k = B.shape
+    if k % 6:
+        return None
+    groups = np.abs(B).reshape(n, k // 6, 6).max(axis=2) > 0.0
+    if np.any(groups.sum(axis=1) > 1):
+        return None
+    return np.where(groups.any(axis=1), groups.argmax(axis=1), -1)
 
 
 class LinearSolver:
