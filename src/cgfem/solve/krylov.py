@@ -33,10 +33,10 @@ RESTART = 50
 
 def collapse_modes(B: np.ndarray) -> np.ndarray:
     """The rigid-body modes of several bodies, ``B`` (n, 6 k) block by block (each row
-    nonzero in one group of six columns at most, :func:`~cgfem.solve.linear.mode_bodies`), summed into six
-    columns (n, 6): on an aggregate that lies in one body (every one of the finest level,
-    :class:`AMGPreconditioner`) both span the same motions, and the coarse blocks are 6x6
-    instead of 6k x 6k. Other shapes are returned as they are."""
+    nonzero in one group of six columns at most, :func:`~cgfem.solve.linear.mode_bodies`),
+    summed into six columns (n, 6): on an aggregate that lies in one body (every one of the
+    finest level, :class:`AMGPreconditioner`) both span the same motions, and the coarse
+    blocks are 6x6 instead of 6k x 6k. Other shapes are returned as they are."""
     n, k = B.shape
     if k == 6 or mode_bodies(B) is None:
         return B

@@ -85,9 +85,8 @@ def strength_within_bodies(A: sp.spmatrix, bodies: np.ndarray) -> sp.csr_matrix:
     between two bodies, span its coarse functions. On pyamg's own strength, whose aggregates
     take in the neighbours across a contact zone (its coupling ``kappa E / h`` is as strong as
     the elements'), the modes of two bodies mixed in one aggregate are neither body's rigid
-    motion: a body held by contact alone then loses its soft motions from the coarse space,
-    and the Krylov solves their convergence (chain3 at level 1 on the Krylov path: 1127 GMRES
-    iterations in 15 solves against 393 in 14)."""
+    motion: a body held by contact alone then loses its soft motions from the coarse space
+    (measurements: docs/performance.md, "The Krylov path")."""
     from pyamg.strength import symmetric_strength_of_connection
 
     C = sp.csr_matrix(symmetric_strength_of_connection(A, 0.0))

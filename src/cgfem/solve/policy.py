@@ -88,10 +88,12 @@ class SolverPolicy:
         factorized whole up to ``SADDLE_DIRECT_DOFS``, above it reduced with a factorized
         preconditioner rebuilt for every matrix).
     krylov_refresh : a Krylov solve that needs more than this many iterations with a kept
-        preconditioner is repeated with a preconditioner of the current matrix ...
-    krylov_refresh_rate : ... unless the last solve with a fresh preconditioner needed more:
-        the limit is then this factor times its iterations per decade of residual times the
-        decades the solve asks for (0: ``krylov_refresh`` alone).
+        preconditioner is repeated with a preconditioner of the current matrix, unless
+        ``krylov_refresh_rate`` allows more.
+    krylov_refresh_rate : the kept preconditioner's limit is also this factor times the
+        iterations per decade of residual of the last solve with a fresh one times the decades
+        the solve asks for, where that is more than ``krylov_refresh`` (0: that limit alone;
+        :meth:`~cgfem.solve.solves.LinearSolves.kept_limit`).
     krylov_max_iterations : iterations after which a Krylov solve with a fresh
         preconditioner is stalled: the system is then factorized directly (logged).
     krylov_rtol : the tightest relative residual a Krylov solve is asked for (inexact Newton
