@@ -200,14 +200,15 @@ def test_per_body_modes_collapse_to_six_columns_with_the_same_span_per_body():
     that body's own modes; columns that mix bodies in a row are left alone."""
     from cgfem.solve.krylov import collapse_modes
     _, _, B = two_bodies(True)
-    C = collapse_modes(B)
+    C = collapse_modes(B, mode_bodies(B))
     n1 = B.shape[0] // 2
     assert C.shape == (B.shape[0], 6)
     np.testing.assert_array_equal(C[:n1], B[:n1, :6])
     np.testing.assert_array_equal(C[n1:], B[n1:, 6:])
     mixed = B.copy()
     mixed[0, 7] = 1.0
-    assert collapse_modes(mixed) is mixed and collapse_modes(B[:, :6]).shape == (B.shape[0], 6)
+    assert mode_bodies(mixed) is None and collapse_modes(mixed, mode_bodies(mixed)) is mixed
+    assert collapse_modes(B[:, :6], mode_bodies(B[:, :6])).shape == (B.shape[0], 6)
 
 
 @pytest.mark.parametrize("symmetric", [True, False])

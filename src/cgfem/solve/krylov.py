@@ -31,14 +31,15 @@ from cgfem.solve.linear import (LinearSolverError, mode_bodies, scale_symmetric,
 RESTART = 50
 
 
-def collapse_modes(B: np.ndarray) -> np.ndarray:
+def collapse_modes(B: np.ndarray, bodies: np.ndarray | None) -> np.ndarray:
     """The rigid-body modes of several bodies, ``B`` (n, 6 k) block by block (each row
-    nonzero in one group of six columns at most, :func:`~cgfem.solve.linear.mode_bodies`),
-    summed into six columns (n, 6): on an aggregate that lies in one body (every one of the
-    finest level, :class:`AMGPreconditioner`) both span the same motions, and the coarse
-    blocks are 6x6 instead of 6k x 6k. Other shapes are returned as they are."""
+    nonzero in one group of six columns at most: ``bodies``, from
+    :func:`~cgfem.solve.linear.mode_bodies`, is not None), summed into six columns (n, 6): on
+    an aggregate that lies in one body (every one of the finest level,
+    :class:`AMGPreconditioner`) both span the same motions, and the coarse blocks are 6x6
+    instead of 6k x 6k. Other shapes are returned as they are."""
     n, k = B.shape
-    if k == 6 or mode_bodies(B) is None:
+    if k == 6 or bodies is None:
         return B
     return B.reshape(n, k // 6, 6).sum(axis=1)
 
@@ -62,8 +63,11 @@ class AMGPreconditioner:
         As = scale_symmetric(A, self._s)
         if symmetric:
             As = (0.5 * (As + As.T)).tocsr()
-        B = None if near_null is None else collapse_modes(np.asarray(near_null, float)) / self._s[:, None]
-        bodies = None if near_null is None else mode_bodies(np.asarray(near_null, float))
+        B, bodies = None, None
+        if near_null is not None:
+            near_null = np.asarray(near_null, float)
+            bodies = mode_bodies(near_null)
+            B = collapse_modes(near_null, bodies) / self._s[:, None]
         if self.n % 3 == 0:
             As = As.tobsr(blocksize=(3, 3))
             bodies = None if bodies is None else bodies[::3]

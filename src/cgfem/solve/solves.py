@@ -148,18 +148,19 @@ class LinearSolves:
             if self._amg is None:
                 self._refresh(K)
                 note = "new"
-            fresh = self._fresh
+            fresh, start = self._fresh, 1.0          # start: the relative residual it starts from
             x, its, res, ok = self._amg.krylov(K, b, target,
                                                p.krylov_max_iterations if fresh else self.kept_limit(target))
             total = its
             if not ok and not fresh:
                 self._refresh(K)
                 note = f"refreshed after {its}"
+                start = res
                 x, its, res, ok = self._amg.krylov(K, b, target, p.krylov_max_iterations, x0=x)
                 total += its
                 fresh = True
-            if ok and fresh and 0.0 < res < 1.0 and its > 0:
-                self._per_decade = its / np.log10(1.0 / res)
+            if ok and fresh and 0.0 < res < start and its > 0:
+                self._per_decade = its / np.log10(start / res)
         except LinearSolverError as err:      # a breakdown (an indefinite matrix for CG), NaN
             self._amg, ok = None, False
             note = str(err)
