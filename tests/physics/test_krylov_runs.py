@@ -155,7 +155,7 @@ def test_a_body_held_by_contact_alone_keeps_the_direct_path_longer():
 def test_aggregates_within_bodies_keep_the_floating_link_in_the_coarse_space(tmp_path, monkeypatch):
     """chain3's Newton matrix at level 1 once both contacts carry (the fourth of the direct
     path's first pass), solved by CG with a fresh preconditioner: with every finest-level
-    aggregate within one body (:func:`cgfem.solve.linear.strength_within_bodies`) 15-20
+    aggregate within one body (:func:`cgfem.solve.multigrid.strength_within_bodies`) 15-20
     iterations reach 1e-3 (measured 15); with pyamg's own strength, whose aggregates take in
     the neighbours across the contact zones, the middle link's rigid motions are no longer
     in the coarse space and the same solve takes 76-115 (measured 76)."""

@@ -12,7 +12,8 @@ import scipy.sparse as sp
 
 from tests.support import elasticity_fixture as fx
 from cgfem.solve.krylov import AMGPreconditioner, krylov_solve
-from cgfem.solve.linear import mode_bodies, rigid_body_modes, smoothed_aggregation, v_cycle
+from cgfem.solve.linear import mode_bodies, rigid_body_modes
+from cgfem.solve.multigrid import smoothed_aggregation, v_cycle
 from cgfem.solve.policy import SolverPolicy
 from cgfem.solve.solves import DIRECT, KRYLOV, LinearSolves
 
@@ -234,19 +235,75 @@ def test_preconditioners_of_the_same_matrix_are_bitwise_equal(symmetric):
 
 
 @pytest.mark.parametrize("symmetric", [True, False])
-def test_one_v_cycle_is_pyamgs_solve_of_one_cycle_bit_for_bit(symmetric):
-    """:func:`~cgfem.solve.linear.v_cycle` (without pyamg's residual norms) returns what
-    ``ml.solve(b, maxiter=1, cycle="V")`` returns, to the last bit, for the hierarchies the
-    project builds (nodal blocks, rigid-body modes, symmetric or not) and for one of a single
-    level."""
+def test_one_v_cycle_is_pyamgs_solve_of_one_cycle(symmetric):
+    """:func:`~cgfem.solve.multigrid.v_cycle` (without pyamg's residual norms, the residual
+    after the pre-smoothing a product with one triangle) returns what
+    ``ml.solve(b, maxiter=1, cycle="V")`` returns to round-off, for the hierarchies the
+    project builds (nodal blocks, rigid-body modes, symmetric or not; one sweep or pyamg's
+    symmetric sweeps on each side), and bit for bit for a single level."""
     K, b, B = two_bodies(symmetric)
-    ml = AMGPreconditioner(K, B, symmetric)._ml
     r = np.random.default_rng(5).standard_normal(K.shape[0])
-    for rhs in (r, b):
-        assert np.array_equal(v_cycle(ml, rhs), ml.solve(rhs, maxiter=1, cycle="V", tol=1e-300))
+    scaled = sp.csr_matrix(K).tobsr(blocksize=(3, 3))
+    for ml in (AMGPreconditioner(K, B, symmetric)._ml, smoothed_aggregation(scaled)):
+        assert len(ml.levels) >= 3
+        for rhs in (r, b):
+            theirs = ml.solve(rhs, maxiter=1, cycle="V", tol=1e-300)
+            ours = v_cycle(ml, rhs)
+            assert np.allclose(ours, theirs, rtol=0.0, atol=1e-12 * np.abs(theirs).max())
+            assert not np.array_equal(ours, np.zeros_like(ours))
     single = smoothed_aggregation(sp.csr_matrix(fx.stiffness(2, 2, 2) + sp.eye(81)), max_levels=1)
     assert len(single.levels) == 1
     assert np.array_equal(v_cycle(single, r[:81]), single.solve(r[:81], maxiter=1, tol=1e-300))
+
+
+@pytest.mark.parametrize("pre", ["forward", "backward", "symmetric"])
+def test_presmoothing_from_zero_reads_one_triangle_for_the_residual(pre):
+    """On every level (3x3 blocks on the finest, 6x6 below with the modes summed over the
+    bodies) the pre-smoothing from zero of :class:`~cgfem.solve.multigrid.BlockSmoother`
+    gives the bits of the same sweeps of the full rows, and its residual, a product with the
+    triangle the last sweep left behind, is ``b - A x`` to round-off; with the two bodies'
+    twelve modes apart the 12x12 diagonal blocks of an aggregate of one body are singular,
+    and there the residual is computed from ``A``."""
+    from cgfem.solve.krylov import collapse_modes
+
+    K, b, B = two_bodies(False)
+    rng = np.random.default_rng(8)
+    sizes = {}
+    for modes in (collapse_modes(B, mode_bodies(B)), B):
+        ml = smoothed_aggregation(sp.csr_matrix(K).tobsr(blocksize=(3, 3)), pre=pre, post=pre, B=modes,
+                                  symmetry="nonsymmetric", improve_candidates=None)
+        for level in ml.levels[:-1]:
+            A, smoother = level.A, level.block_smoother
+            sizes[A.blocksize[0]] = smoother._A is None
+            rhs = rng.standard_normal(A.shape[0])
+            full = np.zeros(A.shape[0])
+            level.presmoother(A, full, rhs)
+            x, residual = smoother.presmooth(rhs)
+            assert np.array_equal(x, full)
+            expected = rhs - A @ x
+            assert np.allclose(residual, expected, rtol=0.0, atol=1e-12 * np.abs(rhs).max())
+            assert np.abs(expected).max() > 1e-3 * np.abs(rhs).max()
+    assert sizes == {3: True, 6: True, 12: False}
+
+
+def test_sweeps_written_out_for_3x3_blocks_are_the_loops_bit_for_bit():
+    """The 3x3 kernels are the generic loops' arithmetic, operation for operation."""
+    from cgfem.solve import _smoother_kernels as kernels
+    from cgfem.solve.multigrid import BlockSmoother
+
+    K, b, _ = two_bodies(False)
+    smoother = BlockSmoother(sp.csr_matrix(K).tobsr(blocksize=(3, 3)), "forward", "backward")
+    x0 = np.random.default_rng(9).standard_normal(K.shape[0])
+    for forward in (True, False):
+        ours, theirs = x0.copy(), x0.copy()
+        kernels.sweep3(*smoother.lower, *smoother.upper, smoother.dinv, ours, b, forward)
+        kernels.sweep(*smoother.lower, *smoother.upper, smoother.dinv, theirs, b, forward)
+        assert np.array_equal(ours, theirs) and not np.array_equal(ours, x0)
+    for part in (smoother.lower, smoother.upper):
+        ours, theirs = np.empty_like(x0), np.empty_like(x0)
+        kernels.product3(*part, x0, ours)
+        kernels.product(*part, x0, theirs)
+        assert np.array_equal(ours, theirs)
 
 
 @pytest.mark.parametrize("symmetric", [True, False])

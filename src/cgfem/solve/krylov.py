@@ -24,8 +24,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from cgfem.solve.linear import (LinearSolverError, mode_bodies, scale_symmetric, smoothed_aggregation,
-                                v_cycle)
+from cgfem.solve.linear import LinearSolverError, mode_bodies, scale_symmetric
+from cgfem.solve.multigrid import smoothed_aggregation, v_cycle
 
 #: inner iterations of one GMRES cycle
 RESTART = 50
@@ -48,7 +48,7 @@ class AMGPreconditioner:
     """One V-cycle of smoothed aggregation on ``A`` (n, n), scaled: ``z = s * V(s * r)``
     with ``s = |diag A|^-1/2``. ``near_null`` (n, 6 k): the rigid-body modes of the bodies
     (zero rows allowed; :func:`collapse_modes`), whose blocks also keep every aggregate of the
-    finest level within one body (:func:`~cgfem.solve.linear.strength_within_bodies`);
+    finest level within one body (:func:`~cgfem.solve.multigrid.strength_within_bodies`);
     ``symmetric``: the hierarchy's restriction is ``P^T`` (CG) or built for a non-symmetric
     ``A`` (GMRES). ``info``: ``setup_s``, ``levels``, ``operator_complexity``."""
 

@@ -36,123 +36,12 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from cgfem.solve._smoother_kernels import block_gauss_seidel
+from cgfem.solve.multigrid import smoothed_aggregation, v_cycle
 
 BACKENDS = ("superlu", "pyamg", "pardiso")
 DIRECT_CHECK = 1e-8  #: relative residual a direct solve must reach
 MAX_ITERATIONS = 1000  #: bound on the Krylov iterations of one pyamg solve
 GMRES_RESTART = 50
-
-
-#: the seed of numpy's global generator while pyamg builds a hierarchy (:func:`smoothed_aggregation`)
-AMG_SEED = 2026
-
-
-def smoothed_aggregation(A: sp.spmatrix, pre: str = "symmetric", post: str = "symmetric",
-                         bodies: np.ndarray | None = None, **kwargs: Any):
-    """pyamg's smoothed-aggregation hierarchy of ``A`` (``kwargs`` as
-    ``pyamg.smoothed_aggregation_solver``'s) with block Gauss-Seidel smoothers, ``pre`` and
-    ``post`` sweeps (:func:`block_sweeps`; pyamg's default is symmetric on both sides), built
-    with numpy's global generator seeded at :data:`AMG_SEED` and restored afterwards.
-    ``bodies`` (one label per node of a BSR ``A``, or per row): the finest level's aggregates
-    are kept within one label (:func:`strength_within_bodies`). pyamg's
-    spectral-radius estimates (the prolongation smoother's weight on every level) start from a
-    random vector of that generator: without the seed two set-ups of the same matrix differ at
-    round-off, and so do the Krylov iterates and a run's contact decisions after them. (The
-    row-wise Gershgorin weight, pyamg's ``"local"``, needs no estimate; on chain2_steel's
-    level-3 Newton matrix it saved a sixth of the set-up and cost a sixth more GMRES
-    iterations, so the default stays.)"""
-    import pyamg
-
-    if bodies is not None and np.unique(bodies).size > 1:
-        kwargs["strength"] = [("predefined", {"C": strength_within_bodies(A, bodies)}), "symmetric"]
-    state = np.random.get_state()
-    np.random.seed(AMG_SEED)
-    try:
-        ml = pyamg.smoothed_aggregation_solver(A, presmoother=("block_gauss_seidel", {"sweep": pre}),
-                                               postsmoother=("block_gauss_seidel", {"sweep": post}), **kwargs)
-    finally:
-        np.random.set_state(state)
-    block_sweeps(ml, pre, post)
-    return ml
-
-
-def strength_within_bodies(A: sp.spmatrix, bodies: np.ndarray) -> sp.csr_matrix:
-    """pyamg's default strength of connection of ``A`` (``symmetric``, ``theta = 0``: every
-    coupling; nodal for a BSR matrix) without the couplings between nodes of different
-    ``bodies`` labels (n_nodes,). Aggregated on it, every finest-level aggregate lies in one
-    body, so that each body's rigid-body modes, and nothing that stretches the contact
-    between two bodies, span its coarse functions. On pyamg's own strength, whose aggregates
-    take in the neighbours across a contact zone (its coupling ``kappa E / h`` is as strong as
-    the elements'), the modes of two bodies mixed in one aggregate are neither body's rigid
-    motion: a body held by contact alone then loses its soft motions from the coarse space
-    (measurements: docs/performance.md, "The Krylov path")."""
-    from pyamg.strength import symmetric_strength_of_connection
-
-    C = sp.csr_matrix(symmetric_strength_of_connection(A, 0.0))
-    bodies = np.asarray(bodies)
-    rows = np.repeat(np.arange(C.shape[0]), np.diff(C.indptr))
-    C.data[bodies[rows] != bodies[C.indices]] = 0.0
-    C.eliminate_zeros()
-    return C
-
-
-def block_sweeps(ml, pre: str, post: str) -> None:
-    """Make the smoothers of every level of the hierarchy ``ml`` whose matrix is in BSR form
-    block Gauss-Seidel sweeps (:func:`~cgfem.solve._smoother_kernels.block_gauss_seidel`):
-    ``pre`` before the coarse correction, ``post`` after it, each ``"forward"``,
-    ``"backward"`` or ``"symmetric"`` (forward, then backward). pyamg's own block Gauss-Seidel
-    does the same arithmetic (a forward sweep gives the same bits) at about half the speed on
-    3x3 blocks. The diagonal blocks are inverted once per level, by pyamg's
-    ``get_block_diag`` as its smoother does."""
-    from pyamg.util.utils import get_block_diag
-
-    directions = {"forward": (True,), "backward": (False,), "symmetric": (True, False)}
-    for level in ml.levels[:-1]:
-        A = level.A
-        if not sp.issparse(A) or A.format != "bsr" or A.blocksize[0] != A.blocksize[1]:
-            continue
-        dinv = np.ascontiguousarray(get_block_diag(A, blocksize=A.blocksize[0], inv_flag=True))
-        level.presmoother = _sweeper(A, dinv, directions[pre])
-        level.postsmoother = _sweeper(A, dinv, directions[post])
-
-
-def _sweeper(A: sp.spmatrix, dinv: np.ndarray, directions: tuple[bool, ...]) -> Callable:
-    """A smoother ``(A, x, b)`` in pyamg's form: the sweeps of ``directions`` on ``A``."""
-    indptr, indices, blocks = A.indptr, A.indices, A.data
-
-    def smooth(_A, x: np.ndarray, b: np.ndarray) -> None:
-        for forward in directions:
-            block_gauss_seidel(indptr, indices, blocks, dinv, x, b, forward)
-    return smooth
-
-
-def v_cycle(ml, b: np.ndarray) -> np.ndarray:
-    """One V-cycle of the multigrid hierarchy ``ml`` on ``A x = b`` (n,) from ``x = 0``: the
-    ``x`` of ``ml.solve(b, maxiter=1, cycle="V")``, operation for operation, without the two
-    residual norms that call computes around its cycle (two products with the finest matrix:
-    a third of the cycle's work on the finest level, wasted in a preconditioner)."""
-    levels, b = ml.levels, np.ravel(b)
-    if len(levels) == 1:
-        return np.asarray(ml.coarse_solver(levels[0].A, b))
-    x = np.zeros_like(b)
-    _descend(ml, 0, x, b)
-    return x
-
-
-def _descend(ml, lvl: int, x: np.ndarray, b: np.ndarray) -> None:
-    """The V-cycle from level ``lvl`` down: pre-smoothing of ``x`` in place, the coarse
-    correction (solved on the coarsest level), post-smoothing."""
-    level = ml.levels[lvl]
-    level.presmoother(level.A, x, b)
-    coarse_b = level.R @ (b - level.A @ x)
-    coarse_x = np.zeros_like(coarse_b)
-    if lvl == len(ml.levels) - 2:
-        coarse_x[:] = ml.coarse_solver(ml.levels[-1].A, coarse_b)
-    else:
-        _descend(ml, lvl + 1, coarse_x, coarse_b)
-    x += level.P @ coarse_x
-    level.postsmoother(level.A, x, b)
 
 
 def scale_symmetric(A: sp.spmatrix, s: np.ndarray) -> sp.csr_matrix:

@@ -38,8 +38,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from cgfem.solve.linear import (LinearSolver, LinearSolverError, build, scale_symmetric,
-                                smoothed_aggregation, v_cycle)
+from cgfem.solve.linear import LinearSolver, LinearSolverError, build, scale_symmetric
+from cgfem.solve.multigrid import smoothed_aggregation, v_cycle
 
 #: inner iterations of one GMRES cycle
 RESTART = 50
