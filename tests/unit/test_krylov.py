@@ -78,22 +78,37 @@ def test_amg_krylov_solves_a_body_held_by_contact(symmetric):
     assert its_plain > 1.25 * its
 
 
-def test_finest_aggregates_lie_within_one_body():
-    """With the bodies' labels (from the blocks of the rigid-body modes) no aggregate of the
-    finest level joins nodes of the two cubes; on pyamg's own strength, where the contact
-    springs count as couplings, some do (9 of 45 here)."""
+def test_aggregates_of_every_level_lie_within_one_body():
+    """With the bodies' labels (from the blocks of the rigid-body modes) no aggregate of any
+    level joins nodes of the two cubes; on pyamg's own strength, where the contact springs
+    count as couplings, some of the finest level's do, and with the labels on the finest
+    level alone (pyamg's own strength below it) some of the next level's."""
+    import pyamg
+
+    from cgfem.solve.multigrid import strength_within_bodies
+
     K, _, B = two_bodies(True, 1.0)
     As = sp.csr_matrix(K).tobsr(blocksize=(3, 3))
     bodies = mode_bodies(B)[::3]
     assert set(bodies) == {0, 1}
 
-    def mixed(**kwargs) -> int:
-        ml = smoothed_aggregation(As, B=B, keep=True, improve_candidates=None, **kwargs)
-        agg = ml.levels[0].AggOp.tocsc()
-        return sum(np.unique(bodies[agg.indices[agg.indptr[j]:agg.indptr[j + 1]]]).size > 1
-                   for j in range(agg.shape[1]))
-    assert mixed(bodies=bodies) == 0
-    assert mixed() > 0
+    def mixed(ml) -> list[int]:
+        labels, counts = bodies, []
+        for level in ml.levels[:-1]:
+            agg = level.AggOp.tocsc()
+            groups = [np.unique(labels[agg.indices[agg.indptr[j]:agg.indptr[j + 1]]]) for j in range(agg.shape[1])]
+            counts.append(sum(g.size > 1 for g in groups))
+            labels = np.array([g[0] for g in groups])
+        return counts
+    within = smoothed_aggregation(As, B=B, keep=True, improve_candidates=None, bodies=bodies)
+    assert len(within.levels) >= 3 and mixed(within) == [0] * (len(within.levels) - 1)
+    assert np.array_equal(within.levels[0].bodies, bodies)
+    assert mixed(smoothed_aggregation(As, B=B, keep=True, improve_candidates=None))[0] > 0
+    finest_only = pyamg.smoothed_aggregation_solver(
+        As, B=B, keep=True, improve_candidates=None,
+        strength=[("predefined", {"C": strength_within_bodies(As, bodies)}), "symmetric"])
+    counts = mixed(finest_only)
+    assert counts[0] == 0 and counts[1] > 0
 
 
 @pytest.mark.parametrize("symmetric", [True, False])

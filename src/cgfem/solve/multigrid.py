@@ -4,8 +4,8 @@ V-cycle.
 pyamg builds the hierarchy (the aggregates, the near-null space's coarse functions, the
 smoothed prolongators); what applies it at every Krylov iteration is here:
 
-- :func:`smoothed_aggregation`: the hierarchy, set up reproducibly, with the finest
-  aggregates kept within one body where asked (:func:`strength_within_bodies`);
+- :func:`smoothed_aggregation`: the hierarchy, set up reproducibly, with the aggregates of
+  every level kept within one body where asked (:func:`strength_within_bodies`);
 - :class:`BlockSmoother`: block Gauss-Seidel sweeps by numba kernels on each BSR level, whose
   matrix it stores as its strictly lower and strictly upper block triangles apart. A V-cycle
   starts every level from zero, so its first sweep needs one triangle only, and the residual
@@ -43,28 +43,69 @@ def smoothed_aggregation(A: sp.spmatrix, pre: str = "symmetric", post: str = "sy
     ``post`` sweeps (:data:`DIRECTIONS`; pyamg's default is symmetric on both sides; every
     BSR level gets a :class:`BlockSmoother`), built with numpy's global generator seeded at
     :data:`AMG_SEED` and restored afterwards. ``bodies`` (one label per node of a BSR ``A``,
-    or per row): the finest level's aggregates are kept within one label
-    (:func:`strength_within_bodies`). pyamg's spectral-radius estimates (the prolongation
-    smoother's weight on every level) start from a random vector of that generator: without
-    the seed two set-ups of the same matrix differ at round-off, and so do the Krylov iterates
-    and a run's contact decisions after them. (The row-wise Gershgorin weight, pyamg's
-    ``"local"``, needs no estimate; on chain2_steel's level-3 Newton matrix it saved a sixth
-    of the set-up and cost a sixth more GMRES iterations, so the default stays.)"""
+    or per row; at least two labels): the aggregates of every level are kept within one label
+    (:func:`_within_bodies`). pyamg's spectral-radius estimates (the prolongation smoother's
+    weight on every level) start from a random vector of that generator: without the seed two
+    set-ups of the same matrix differ at round-off, and so do the Krylov iterates and a run's
+    contact decisions after them. (The row-wise Gershgorin weight, pyamg's ``"local"``, needs
+    no estimate; on chain2_steel's level-3 Newton matrix it saved a sixth of the set-up and
+    cost a sixth more GMRES iterations, so the default stays.)"""
     import pyamg
 
-    if bodies is not None and np.unique(bodies).size > 1:
-        kwargs["strength"] = [("predefined", {"C": strength_within_bodies(A, bodies)}), "symmetric"]
+    smoothers = {"presmoother": ("block_gauss_seidel", {"sweep": pre}),
+                 "postsmoother": ("block_gauss_seidel", {"sweep": post})}
     state = np.random.get_state()
     np.random.seed(AMG_SEED)
     try:
-        ml = pyamg.smoothed_aggregation_solver(A, presmoother=("block_gauss_seidel", {"sweep": pre}),
-                                               postsmoother=("block_gauss_seidel", {"sweep": post}), **kwargs)
+        if bodies is not None and np.unique(bodies).size > 1:
+            ml = _within_bodies(A, np.asarray(bodies), **smoothers, **kwargs)
+        else:
+            ml = pyamg.smoothed_aggregation_solver(A, **smoothers, **kwargs)
     finally:
         np.random.set_state(state)
     for level in ml.levels[:-1]:
         M = level.A
         if sp.issparse(M) and M.format == "bsr" and M.blocksize[0] == M.blocksize[1]:
             BlockSmoother(M, pre, post).install(level)
+    return ml
+
+
+def _within_bodies(A: sp.spmatrix, bodies: np.ndarray, max_levels: int = 10, max_coarse: int = 10,
+                   B: np.ndarray | None = None, BH: np.ndarray | None = None, keep: bool = False,
+                   **kwargs: Any):
+    """pyamg's hierarchy built one level at a time, each level aggregated on the strength of
+    connection within ``bodies`` (:func:`strength_within_bodies`; the labels of a coarse
+    level's nodes are those of their aggregates), ``max_levels`` and ``max_coarse`` (nodes)
+    as pyamg's, the other ``kwargs`` applied at every level; ``keep``: every level keeps its
+    ``AggOp`` (and pyamg's other set-up operators) and its nodes' ``bodies``. pyamg takes a predefined
+    strength only for matrices known before the set-up (the finest); on its own strength the
+    coarser levels' aggregates take in nodes across the contact zones again, and there the
+    relative rigid motions of the bodies, a floating one's above all, leave the coarse
+    space (docs/performance.md, "The Krylov path")."""
+    import pyamg
+
+    levels = []
+    while True:
+        C = strength_within_bodies(A, bodies)
+        ml = pyamg.smoothed_aggregation_solver(A, B=B, BH=BH, strength=[("predefined", {"C": C})],
+                                               max_levels=2, max_coarse=max_coarse, keep=True, **kwargs)
+        if len(ml.levels) == 1:
+            break
+        fine, coarse = ml.levels
+        members = sp.csc_matrix(fine.AggOp)
+        labels = np.empty(members.shape[1], bodies.dtype)
+        labels[np.repeat(np.arange(members.shape[1]), np.diff(members.indptr))] = bodies[members.indices]
+        if keep:
+            fine.bodies = bodies
+        else:
+            for name in ("C", "T", "AggOp", "Cnodes"):
+                vars(fine).pop(name, None)
+        levels.append(fine)
+        A, B, BH, bodies = coarse.A, coarse.B, getattr(coarse, "BH", None), labels
+        nodes = A.shape[0] // (A.blocksize[0] if A.format == "bsr" else 1)
+        if len(levels) + 1 >= max_levels or nodes <= max_coarse:
+            break
+    ml.levels = levels + ml.levels[-1:]
     return ml
 
 
