@@ -387,7 +387,12 @@ def run_case(case: Case, level: int, surface: str, out: Path,
         name = signal.Signals(stop.signum).name
         message = (f"interrupted by {name} after {len(steps)} converged step(s)"
                    + (f", at load factor {steps[-1]['load_factor']:.6g}" if steps else ""))
-        return RunStatus(INTERRUPTED, summary(INTERRUPTED, message), message, stop.signum)
+        try:
+            written = summary(INTERRUPTED, message)
+        except OSError as err:  # the folder removed under the run (a workflow manager cleaning up)
+            message += f"; summary.json not written: {err.strerror or err}"
+            written = out / "summary.json"
+        return RunStatus(INTERRUPTED, written, message, stop.signum)
     return RunStatus(result.status, summary(result.status, result.message), result.message)
 
 

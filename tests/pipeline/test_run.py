@@ -241,6 +241,29 @@ def test_memory_estimate_without_contact_lets_the_bent_half_torus_run_order_2_at
     assert KRYLOV_MEMORY_NO_CONTACT[2] < KRYLOV_MEMORY[2]
 
 
+def test_interrupted_run_whose_folder_was_removed_says_so(tmp_path):
+    """A workflow manager that stops a run may remove its output folder before the run has
+    written its summary (snakemake does): the run still ends as interrupted, with one line
+    saying the summary was not written, never a traceback."""
+    import shutil
+
+    from cgfem.case import load_case
+    from cgfem.run import INTERRUPTED, run_case
+    from cgfem.errors import RunInterrupted
+
+    out = tmp_path / "out"
+
+    def log(message: str) -> None:
+        if message.startswith("step 1 converged"):
+            shutil.rmtree(out)
+            raise RunInterrupted(signal.SIGTERM)
+    status = run_case(load_case(_write(tmp_path, LINK)), 0, "nurbs_fe", out, log)
+    assert status.status == INTERRUPTED and status.signum == signal.SIGTERM
+    assert status.message.startswith("interrupted by SIGTERM after 1 converged step(s)")
+    assert status.message.endswith("summary.json not written: No such file or directory")
+    assert not out.exists()
+
+
 def test_run_rejects_case_errors_like_check(tmp_path, capsys):
     bad = LINK.replace("outer_tol: 1.0e-6", "outer_tol: 1.0e-6, ghost_penalty: -1")
     code = main(["run", _write(tmp_path, bad), "--level", "0", "--surface", "facets", "--out", str(tmp_path)])

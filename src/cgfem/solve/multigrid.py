@@ -77,11 +77,11 @@ def _within_bodies(A: sp.spmatrix, bodies: np.ndarray, max_levels: int = 10, max
     connection within ``bodies`` (:func:`strength_within_bodies`; the labels of a coarse
     level's nodes are those of their aggregates), ``max_levels`` and ``max_coarse`` (nodes)
     as pyamg's, the other ``kwargs`` applied at every level; ``keep``: every level keeps its
-    ``AggOp`` (and pyamg's other set-up operators) and its nodes' ``bodies``. pyamg takes a predefined
-    strength only for matrices known before the set-up (the finest); on its own strength the
-    coarser levels' aggregates take in nodes across the contact zones again, and there the
-    relative rigid motions of the bodies, a floating one's above all, leave the coarse
-    space (docs/performance.md, "The Krylov path")."""
+    ``AggOp`` (and pyamg's other set-up operators) and its nodes' ``bodies``. pyamg takes a
+    predefined strength only for matrices known before the set-up (the finest); on its own
+    strength the coarser levels' aggregates take in nodes across the contact zones again,
+    and there the relative rigid motions of the bodies, a floating one's above all, leave
+    the coarse space (docs/performance.md, "The Krylov path")."""
     import pyamg
 
     levels = []
