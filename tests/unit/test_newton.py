@@ -137,3 +137,48 @@ def test_log_notes_say_how_each_step_was_taken():
     # x halves its distance to the root each step: 10 steps to 1e-3
     assert res.converged and len(res.residuals) - 1 == 10
     assert all(n == "limited to 0.5" for n in notes[1:])
+
+
+def _contracting(rate):
+    """r(u) = u with a solver whose step removes only ``1 - rate`` of it: |r| falls by
+    ``rate`` per iteration, every full step passes Armijo."""
+    def assemble(u, tangent):
+        return u.copy(), (np.eye(1) if tangent else None)
+
+    def solve(K, b):
+        return (1.0 - rate) * np.linalg.solve(K, b)
+    return assemble, solve
+
+
+@pytest.mark.parametrize("rate, stops_at", [(0.95, 10), (0.9, None)])
+def test_newton_stops_where_ten_iterations_have_not_halved_the_residual(rate, stops_at):
+    """|r| falling by 0.95 per iteration: after ten (0.95^10 = 0.60 > 0.5) Newton stops as
+    ``stagnated``; by 0.9 (0.9^10 = 0.35) it goes on to the cap. Without the window (0) it
+    never stops early."""
+    assemble, solve = _contracting(rate)
+    res = newton(assemble, np.array([1.0]), solve, tol=1e-12, reference=1.0, max_iter=30,
+                 stagnation=(10, 0.5))
+    assert not res.converged
+    if stops_at is None:
+        assert res.reason == "max_iterations" and len(res.residuals) == 31
+    else:
+        assert res.reason == "stagnated" and len(res.residuals) == stops_at + 1
+        assert res.u[0] == pytest.approx(rate ** stops_at, rel=1e-12)
+    off = newton(assemble, np.array([1.0]), solve, tol=1e-12, reference=1.0, max_iter=30)
+    assert off.reason == "max_iterations" and len(off.residuals) == 31
+
+
+def test_a_solve_that_converges_after_a_slow_stretch_is_not_stopped():
+    """Nine slow iterations (0.95 each) then full Newton steps: the window never sees ten
+    iterations without halving, and Newton converges."""
+    count = [0]
+
+    def assemble(u, tangent):
+        return u.copy(), (np.eye(1) if tangent else None)
+
+    def solve(K, b):
+        count[0] += 1
+        return (0.05 if count[0] <= 9 else 1.0 - 1e-3) * np.linalg.solve(K, b)
+    res = newton(assemble, np.array([1.0]), solve, tol=1e-9, reference=1.0, max_iter=30,
+                 stagnation=(10, 0.5))
+    assert res.converged and res.reason == "converged"

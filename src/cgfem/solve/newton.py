@@ -15,6 +15,12 @@ solution the monotone search would give up on. Non-monotone from the start loses
 level 1 (its middle link, held by contact alone, wanders off); monotone alone loses
 chain2_rubber at level 1 with facets.
 
+``stagnation=(window, factor)``: Newton stops (reason ``stagnated``) once the smallest
+residual of its last ``window`` iterates is above ``factor`` times the smallest one before
+them: a solve that has not halved its residual in ten iterations (contact points switching,
+a floating body's steps cut short by its limit) has not converged within the iteration cap
+in any run of the examples, and its increment is cut back as after the cap, only sooner.
+
 Inexact Newton (``forcing``): an iterative linear solve need only reach the relative residual
 ``eta = forcing * tol * reference / |r|``: its error then adds at most ``forcing`` times the
 tolerance to the next residual, so the convergence test is met as with an exact solve, and
@@ -50,7 +56,8 @@ class NewtonResult:
 
     residuals : residual norms, the first at the initial guess
     reference : the force scale convergence was measured against
-    reason : why it stopped ("converged", "max_iterations", "line_search", "nan", "linear_solver")
+    reason : why it stopped ("converged", "max_iterations", "line_search", "stagnated", "nan",
+        "linear_solver")
     """
 
     u: np.ndarray
@@ -64,15 +71,16 @@ def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0
            solve: Callable[[object, np.ndarray], np.ndarray], *, tol: float, reference: float,
            max_iter: int, log: Callable[[int, float, str], None] | None = None,
            fixed_tangent: bool = False, limit: Callable[[np.ndarray], np.ndarray] | None = None,
-           forcing: float | None = None, forcing_max: float = 0.0, loose: float = 0.0) -> NewtonResult:
+           forcing: float | None = None, forcing_max: float = 0.0, loose: float = 0.0,
+           stagnation: tuple[int, float] = (0, 0.0)) -> NewtonResult:
     """Solve ``r(u) = 0`` from ``u0`` until ``|r| <= tol * max(reference, |r(u0)|)``. With
     ``fixed_tangent`` no tangent is assembled (``solve`` gets None and must use a
     factorization it kept: modified Newton). ``limit(du)``: the Newton step shortened
     before the line search (a trust region on some unknowns), ``du`` itself if it is not.
     ``log(iteration, |r| / reference, note)``: ``note`` says how the step was shortened
     (line-search fraction, the limit's ratio of step norms), empty for a full step. ``forcing``:
-    inexact Newton (module docstring), None for exact solves; ``forcing_max`` and ``loose``:
-    module docstring (0 turns them off)."""
+    inexact Newton (module docstring), None for exact solves; ``forcing_max``, ``loose`` and
+    ``stagnation``: module docstring (0 turns them off)."""
     u = u0.copy()
     need = not fixed_tangent
     r, K = assemble(u, need)
@@ -128,6 +136,9 @@ def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0
         result.residuals.append(norm)
         if log:
             log(it, norm / reference, _step_note(taken, shortened))
+        if norm > target and stagnated(result.residuals, *stagnation):
+            result.reason = "stagnated"
+            break
     else:
         if norm <= target:
             result.converged, result.reason = True, "converged"
@@ -135,6 +146,14 @@ def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0
             result.reason = "max_iterations"
     result.u = u
     return result
+
+
+def stagnated(residuals: list[float], window: int, factor: float) -> bool:
+    """Whether the smallest of the last ``window`` residuals is above ``factor`` times the
+    smallest one before them (False for ``window`` 0 or fewer than ``window + 1`` residuals)."""
+    if window <= 0 or len(residuals) <= window:
+        return False
+    return min(residuals[-window:]) > factor * min(residuals[:-window])
 
 
 def _step_note(step: float, shortened: float) -> str:

@@ -66,7 +66,7 @@ class Increment:
 @dataclass(frozen=True)
 class IncrementFailure:
     """Why an increment failed: Newton's ``reason`` (``max_iterations``, ``line_search``,
-    ``nan`` or ``linear_solver: ...``) in outer pass ``outer_pass``, its last residual over
+    ``stagnated``, ``nan`` or ``linear_solver: ...``) in outer pass ``outer_pass``, its last residual over
     its reference ``residual``, after ``iterations`` Newton iterations; ``contact``: what the
     contact set did at the last linearization point (empty without contact). ``rejected``:
     the outer loop ended but its state is no solution of the model (reason ``rejected``,
@@ -281,6 +281,7 @@ def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray 
                               max_iter=policy.modified_newton_iterations if fixed_tangent else options.max_newton,
                               fixed_tangent=fixed_tangent, limit=limit, forcing=policy.forcing,
                               forcing_max=0.0 if solves.factorizes else policy.forcing_max, loose=stop_at,
+                              stagnation=(policy.stagnation_window, policy.stagnation_factor),
                               log=lambda k, r, note: log(f"t={t:.4g} pass {outer} newton {k}: |r|/ref={r:.3e}  "
                                                          f"({time.perf_counter() - tic:.2f} s"
                                                          f"{'; ' + note if note else ''})"))

