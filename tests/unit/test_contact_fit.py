@@ -261,3 +261,20 @@ def test_fitted_surface_is_c1_across_the_circles_double_knots(torus):
         if smooth:
             assert fit.n_free < fit.n_ctrl
     assert jumps[True] < 1e-6 < 1e-3 < jumps[False], jumps
+
+
+def test_band_order_folds_the_seams_of_a_closed_patch(torus):
+    """The torus patch closes on itself in both directions: in the natural numbering its
+    seams couple the first and last rows (bandwidth about n); the order chosen with M's
+    pattern is reverse Cuthill-McKee's, at most a fifth of n, and the fit solves the same."""
+    from cgfem.contact.fit import bandwidth
+    fit = _fit(torus, 0)
+    M = fit.M
+    n = M.shape[0]
+    chosen = fit.factor.perm
+    assert bandwidth(M, np.arange(n)) >= n // 2
+    assert bandwidth(M, chosen) <= n // 5
+    assert fit.factor.bandwidth == bandwidth(M, chosen)
+    b = np.random.default_rng(3).standard_normal((n, 3))
+    assert np.abs(fit.factor.solve(b) - np.linalg.solve(M.toarray(), b)).max() <= 1e-10 * np.abs(
+        np.linalg.solve(M.toarray(), b)).max()

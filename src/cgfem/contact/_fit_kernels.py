@@ -79,48 +79,49 @@ def rational_basis_batch(p, q, U, V, weights, uv, index, R):
 
 
 @njit(cache=True)
-def banded_cholesky(ab):
+def banded_cholesky(lb):
     """Cholesky factorization ``A = L L^T`` of a symmetric banded matrix in place, lower
-    band storage ``ab[d, j] = A[j + d, j]`` (bandwidth + 1, n) -> ``ab[d, j] = L[j + d, j]``.
+    band stored by columns, ``lb[j, d] = A[j + d, j]`` (n, bandwidth + 1) ->
+    ``lb[j, d] = L[j + d, j]``: every loop runs along a column's band, contiguous in memory.
     Returns -1, or the first column whose pivot is not positive (A not positive definite)."""
-    bw = ab.shape[0] - 1
-    n = ab.shape[1]
+    n = lb.shape[0]
+    bw = lb.shape[1] - 1
     for j in range(n):
         # column j of L from the columns k < j that reach row j
         for k in range(max(0, j - bw), j):
-            ljk = ab[j - k, k]
+            ljk = lb[k, j - k]
             if ljk == 0.0:
                 continue
             for i in range(j, min(n, k + bw + 1)):
-                ab[i - j, j] -= ab[i - k, k] * ljk
-        pivot = ab[0, j]
+                lb[j, i - j] -= lb[k, i - k] * ljk
+        pivot = lb[j, 0]
         if not pivot > 0.0:
             return j
         d = np.sqrt(pivot)
-        ab[0, j] = d
+        lb[j, 0] = d
         for i in range(1, min(bw + 1, n - j)):
-            ab[i, j] /= d
+            lb[j, i] /= d
     return -1
 
 
 @njit(cache=True)
-def banded_cholesky_solve(ab, b):
+def banded_cholesky_solve(lb, b):
     """Solve ``L L^T x = b`` in place for ``b`` (n, m) with the factor of
     :func:`banded_cholesky`."""
-    bw = ab.shape[0] - 1
-    n = ab.shape[1]
+    n = lb.shape[0]
+    bw = lb.shape[1] - 1
     m = b.shape[1]
     for j in range(n):                      # L y = b
         for c in range(m):
-            b[j, c] /= ab[0, j]
+            b[j, c] /= lb[j, 0]
         for i in range(j + 1, min(n, j + bw + 1)):
-            lij = ab[i - j, j]
+            lij = lb[j, i - j]
             for c in range(m):
                 b[i, c] -= lij * b[j, c]
     for j in range(n - 1, -1, -1):          # L^T x = y
         for i in range(j + 1, min(n, j + bw + 1)):
-            lij = ab[i - j, j]
+            lij = lb[j, i - j]
             for c in range(m):
                 b[j, c] -= lij * b[i, c]
         for c in range(m):
-            b[j, c] /= ab[0, j]
+            b[j, c] /= lb[j, 0]

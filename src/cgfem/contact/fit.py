@@ -18,8 +18,11 @@ control point ``P[k]``. The FE side acts per component: ``V[:, c] = M^{-1} G u[:
 ``u`` (n_dofs,) node-major (``u.reshape(-1, 3)``).
 
 ``M`` is banded (bandwidth ``p n_v + q`` in this numbering, or ``q n_u + p`` in the
-transposed one, whichever is smaller) and factorized once by a banded Cholesky
-(:class:`BandedCholesky`), which also proves it positive definite. The fitting space, the
+transposed one) and factorized once by a banded Cholesky (:class:`BandedCholesky`), which
+also proves it positive definite. A patch that closes on itself (a full torus: both
+directions) couples its first and last rows, so neither numbering is banded; reverse
+Cuthill-McKee then folds the rings (chain3's middle link at level 2: bandwidth 173 instead
+of 2975, :func:`band_order`). The fitting space, the
 ties and why the fit stays a constraint in the solver: docs/methods/contact.md.
 """
 
@@ -33,6 +36,7 @@ from typing import Sequence
 import meshio
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from cgfem.contact import _fit_kernels as _k
 from cgfem.contact.surfaces import locate_points
@@ -268,7 +272,7 @@ class BandedCholesky:
     banded routine on these small bands on a busy machine).
 
     perm : (n,) the original index of every row of the permuted matrix
-    factor : (bandwidth + 1, n) lower band of L, ``factor[d, j] = L[j + d, j]``
+    factor : (n, bandwidth + 1) lower band of L by columns, ``factor[j, d] = L[j + d, j]``
     """
 
     perm: np.ndarray
@@ -280,16 +284,16 @@ class BandedCholesky:
         is not positive definite."""
         A = sp.tril(sp.csr_matrix(M)[perm][:, perm]).tocoo()
         bandwidth = int((A.row - A.col).max()) if A.nnz else 0
-        ab = np.zeros((bandwidth + 1, M.shape[0]))
-        ab[A.row - A.col, A.col] = A.data
-        failed = _k.banded_cholesky(ab)
+        lb = np.zeros((M.shape[0], bandwidth + 1))
+        lb[A.col, A.row - A.col] = A.data
+        failed = _k.banded_cholesky(lb)
         if failed >= 0:
             raise np.linalg.LinAlgError(f"not positive definite (pivot {failed})")
-        return cls(np.asarray(perm, np.int64), ab)
+        return cls(np.asarray(perm, np.int64), lb)
 
     @property
     def bandwidth(self) -> int:
-        return int(self.factor.shape[0] - 1)
+        return int(self.factor.shape[1] - 1)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         """``M^{-1} b`` for ``b`` (n,) or (n, m)."""
@@ -301,12 +305,28 @@ class BandedCholesky:
         return x.reshape(b.shape)
 
 
-def band_order(n_u: int, n_v: int, degree: tuple[int, int]) -> np.ndarray:
+def band_order(n_u: int, n_v: int, degree: tuple[int, int], M: sp.spmatrix | None = None) -> np.ndarray:
     """Permutation (n_u n_v,) of the u-major control numbering that minimises the bandwidth
-    of M: u-major (bandwidth ``p n_v + q``) or v-major (``q n_u + p``)."""
+    of M: u-major (bandwidth ``p n_v + q``) or v-major (``q n_u + p``); given ``M`` (its
+    pattern), the one of those and reverse Cuthill-McKee's whose bandwidth in ``M`` is
+    smallest, the natural ones first on a tie (a closed direction's seam couples its first
+    and last rows, which only the latter folds)."""
     p, q = degree
     natural = np.arange(n_u * n_v)
-    return natural if p * n_v + q <= q * n_u + p else natural.reshape(n_u, n_v).T.ravel()
+    transposed = natural.reshape(n_u, n_v).T.ravel()
+    if M is None:
+        return natural if p * n_v + q <= q * n_u + p else transposed
+    pattern = sp.csr_matrix(M)
+    candidates = (natural, transposed, reverse_cuthill_mckee(pattern, symmetric_mode=True).astype(np.int64))
+    return min(candidates, key=lambda perm: bandwidth(pattern, perm))
+
+
+def bandwidth(M: sp.spmatrix, perm: np.ndarray) -> int:
+    """Largest ``|i - j|`` over the entries of ``M[perm][:, perm]``."""
+    A = sp.coo_matrix(M)
+    rank = np.empty(perm.size, np.int64)
+    rank[perm] = np.arange(perm.size)
+    return int(np.abs(rank[A.row] - rank[A.col]).max()) if A.nnz else 0
 
 
 # -- the fit of one patch ---------------------------------------------------------------
@@ -456,7 +476,7 @@ def build_fit(surface: NurbsSurface, uv: np.ndarray, w: np.ndarray, space: Space
                          f"support (first: free control ({empty[0] // free[1]}, {empty[0] % free[1]})); "
                          f"use a coarser fit or a finer rule")
     try:
-        factor = BandedCholesky.of(M, band_order(*free, fitting.degree))
+        factor = BandedCholesky.of(M, band_order(*free, fitting.degree, M))
     except np.linalg.LinAlgError:
         raise ValueError(f"{label}: the fit matrix M ({M.shape[0]} control points) is not positive definite: "
                          f"the surface rule cannot tell its basis functions apart; use a coarser fit") from None
