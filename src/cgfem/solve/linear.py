@@ -3,12 +3,13 @@
 - ``superlu``: :func:`scipy.sparse.linalg.splu` with MMD on ``A^T + A`` (COLAMD: 5 % more
   fill, 10-20 % slower on H8 elasticity); symmetric matrices in symmetric mode (diagonal
   pivots, threshold 0.01). Never ``spsolve``: with scikit-umfpack it silently uses UMFPACK.
-- ``pardiso``: MKL PARDISO through one :class:`pypardiso.PyPardisoSolver` per solver (freed
-  with it); symmetric matrices as type -2 (upper triangle), 2-4x faster and half the memory
-  of the non-symmetric type 11 at 30k-100k DOFs. Always in its conditional numerical
-  reproducibility mode (``iparm(34)``, the number of MKL threads) with MKL's dynamic thread
-  adjustment off: a factorization gives the same bits whatever the machine's load, where
-  the default mode's parallel factorization does not (:func:`mkl_threads`).
+- ``pardiso``: MKL PARDISO (:mod:`cgfem.solve.pardiso`), one instance per solver (freed
+  with it), or the instance of the solver it replaces (``reuse``), whose analysis serves a
+  matrix within its pattern; symmetric matrices as type -2 (upper triangle), 2-4x faster and
+  half the memory of the non-symmetric type 11 at 30k-100k DOFs. Always in its conditional
+  numerical reproducibility mode (``iparm(34)``, the number of MKL threads) with MKL's
+  dynamic thread adjustment off: a factorization gives the same bits whatever the machine's
+  load, where the default mode's parallel factorization does not (:func:`mkl_threads`).
 - ``pyamg``: smoothed aggregation on 3x3 nodal blocks with the near-null space (rigid-body
   modes) as preconditioner of CG (symmetric) or GMRES(50), after the symmetric diagonal
   scaling ``D^-1/2 A D^-1/2`` (penalty rows, tiny cut cells); converged when the true
@@ -29,7 +30,6 @@ import functools
 import importlib
 import os
 import time
-import weakref
 from typing import Any, Callable
 
 import numpy as np
@@ -37,6 +37,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from cgfem.solve.multigrid import smoothed_aggregation, v_cycle
+from cgfem.solve.pardiso import PardisoError, PardisoPattern, positions_within, union_pattern
 
 BACKENDS = ("superlu", "pyamg", "pardiso")
 DIRECT_CHECK = 1e-8  #: relative residual a direct solve must reach
@@ -209,9 +210,8 @@ def mkl_threads() -> int | None:
 class _Pardiso(_DirectSolver):
     backend = "pardiso"
 
-    def __init__(self, A: sp.csr_matrix, symmetric: bool, indefinite: bool = False) -> None:
-        from pypardiso.pardiso_wrapper import PyPardisoError, PyPardisoSolver
-
+    def __init__(self, A: sp.csr_matrix, symmetric: bool, indefinite: bool = False,
+                 reuse: LinearSolver | None = None) -> None:
         super().__init__(A.shape[0])
         if np.any(np.diff(A.indptr) == 0):
             raise LinearSolverError("pardiso: the matrix has empty rows (singular matrix)")
@@ -226,37 +226,45 @@ class _Pardiso(_DirectSolver):
             starts = U.indptr[:-1]
             if np.all(np.diff(U.indptr) > 0) and np.all(U.indices[starts] == np.arange(self.n)):
                 mtype, M = -2, U
-        self._M, self._matvec = M, A.dot  # the check uses all of A, not just its upper half
-        if "PYPARDISO_MKL_RT" in os.environ:
-            self._solver = PyPardisoSolver(mtype=mtype)
-        else:  # point pypardiso at the runtime found once, through its documented variable
-            os.environ["PYPARDISO_MKL_RT"] = _mkl_rt()
-            try:
-                self._solver = PyPardisoSolver(mtype=mtype)
-            finally:
-                del os.environ["PYPARDISO_MKL_RT"]
-        weakref.finalize(self, self._solver.free_memory, True)
-        # PARDISO's defaults for the type, then its conditional numerical reproducibility mode
-        # with the threads MKL uses (iparm(1) = 1 from pardisoinit: our iparm is read)
-        solver = self._solver
+        M.sort_indices()
+        self._matvec = A.dot  # the check uses all of A, not just its upper half
         threads = mkl_threads() or 1
-        _mkl_library().pardisoinit(solver.pt.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)),
-                                   ctypes.byref(ctypes.c_int32(mtype)),
-                                   solver.iparm.ctypes.data_as(ctypes.POINTER(ctypes.c_int32)))
-        solver.iparm[33] = threads
+        pattern = reuse._take(mtype, self.n) if isinstance(reuse, _Pardiso) else None
+        analysed = pattern is None
         try:
-            self._solver.factorize(M)
-        except PyPardisoError as exc:
+            data = None if pattern is None else pattern.within(M.indptr, M.indices, M.data)
+            if data is None:
+                indptr, indices, data = M.indptr, M.indices, M.data
+                if pattern is not None:   # entries outside the pattern: analyse the union
+                    indptr, indices = union_pattern(pattern.indptr, pattern.indices, M.indptr, M.indices)
+                    del pattern           # its memory first
+                    data = np.zeros(indices.size)
+                    data[positions_within(M.indptr, M.indices, indptr, indices)] = M.data
+                    analysed = True
+                pattern = PardisoPattern(_mkl_library(), mtype, indptr, indices, data, threads)
+            pattern.factorize(data)
+        except PardisoError as exc:
             raise LinearSolverError(f"pardiso: factorization failed: {exc}") from exc
-        self.info.update(mtype=mtype, perturbed_pivots=int(self._solver.get_iparm(14)),
-                         factor_nnz=int(self._solver.get_iparm(18)), threads=threads)
+        self._pattern: PardisoPattern | None = pattern
+        self.info.update(mtype=mtype, perturbed_pivots=pattern.perturbed_pivots, factor_nnz=pattern.factor_nnz,
+                         threads=threads, analysed=analysed)
+
+    def _take(self, mtype: int, n: int) -> PardisoPattern | None:
+        """This solver's analysed pattern, for a new matrix of type ``mtype`` and size ``n``
+        (None if it is of another type or size, or was taken): this solver cannot solve
+        afterwards."""
+        pattern = self._pattern
+        if pattern is None or pattern.mtype != mtype or pattern.n != n:
+            return None
+        self._pattern = None
+        return pattern
 
     def _apply(self, b: np.ndarray) -> np.ndarray:
-        # PyPardisoSolver.solve reuses the factors while M equals its stored copy of M (an
-        # O(nnz) comparison, a few % of a solve); pypardiso.spsolve would refactorize.
+        if self._pattern is None:
+            raise LinearSolverError("pardiso: this factorization was superseded by a later matrix's")
         try:
-            return self._solver.solve(self._M, b)
-        except Exception as exc:
+            return self._pattern.solve(b)
+        except PardisoError as exc:
             raise LinearSolverError(f"pardiso: solve failed: {exc}") from exc
 
 
@@ -315,13 +323,15 @@ class _AMG(LinearSolver):
 
 
 def build(A: sp.spmatrix, name: str, *, symmetric: bool = True, near_null: np.ndarray | None = None,
-          rtol: float = 1e-10, indefinite: bool = False) -> LinearSolver:
+          rtol: float = 1e-10, indefinite: bool = False, reuse: LinearSolver | None = None) -> LinearSolver:
     """The backend ``name`` (one of :data:`BACKENDS`) set up on its own copy of the square
     matrix ``A`` (n, n): factorized (superlu, pardiso) or coarsened (pyamg, which uses
     ``near_null`` (n, k) and the relative residual ``rtol``). ``indefinite``: a saddle point
     (pardiso then factorizes it as non-symmetric). Which backend a system gets is decided in
-    :mod:`cgfem.solve.backends`. Raises :class:`LinearSolverError` on a singular or
-    non-finite matrix."""
+    :mod:`cgfem.solve.backends`. ``reuse``: a pardiso solver of an earlier matrix of the
+    same system, no longer needed: its analysis serves if this matrix's entries lie within its
+    pattern (:mod:`cgfem.solve.pardiso`), and it cannot solve afterwards. Raises
+    :class:`LinearSolverError` on a singular or non-finite matrix."""
     t0 = time.perf_counter()
     A = sp.csr_matrix(A, dtype=np.float64, copy=True)  # our own copy, sorted and summed
     A.sum_duplicates()
@@ -331,7 +341,7 @@ def build(A: sp.spmatrix, name: str, *, symmetric: bool = True, near_null: np.nd
     if name == "superlu":
         solver = _SuperLU(A, symmetric)
     elif name == "pardiso":
-        solver = _Pardiso(A, symmetric, indefinite)
+        solver = _Pardiso(A, symmetric, indefinite, reuse)
     elif name == "pyamg":
         solver = _AMG(A, symmetric, near_null, rtol)
     else:

@@ -119,8 +119,12 @@ class LinearSolves:
         if self.path(n) == KRYLOV:
             return self._krylov(K, b, rtol)
         if self._key is not K and not (self.frozen and self._factor is not None):
+            # the last matrix's solver lends its analysis where the pattern allows (and cannot
+            # solve afterwards)
+            previous, self._factor = self._factor, None
             self._factor = factorize(K, backend=self.backend, symmetric=self.symmetric,
-                                     near_null=self.near_null, indefinite=self.indefinite, saddle=self.saddle)
+                                     near_null=self.near_null, indefinite=self.indefinite, saddle=self.saddle,
+                                     reuse=previous)
             self._key = K
             if not self._logged:
                 self._logged = True
