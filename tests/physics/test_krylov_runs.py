@@ -99,14 +99,21 @@ def test_krylov_path_holds_a_body_held_by_contact_alone(tmp_path):
 
 def test_a_stalled_krylov_solve_falls_back_and_the_run_converges(tmp_path):
     """With two Krylov iterations allowed no solve reaches its tolerance: every one falls
-    back to a factorization (logged), and the run converges to the direct path's state."""
+    back to a factorization (logged), and the run converges to the direct path's state. With
+    the matrices after a stall factorized directly (``krylov_stall_direct``, 4) it stalls
+    less often, at most once per five matrices, and converges there too."""
     case = first_step("chain2_steel", 0.5)
-    stall = replace(KRYLOV, krylov_max_iterations=2, krylov_refresh=2)
+    stall = replace(KRYLOV, krylov_max_iterations=2, krylov_refresh=2, krylov_stall_direct=0)
     direct, _ = solve(case, 0, "nurbs_fe", tmp_path / "direct", SolverPolicy())
     fallen, lines = solve(case, 0, "nurbs_fe", tmp_path / "stalled", stall)
     assert sum("stalled" in line and "fell back" in line for line in lines) >= newton_iterations(fallen) // 2
     a, b = reactions(direct), reactions(fallen)
     assert np.abs(a - b).max() <= 1e-8 * np.abs(a).max()
+    stay, lines = solve(case, 0, "nurbs_fe", tmp_path / "stay", replace(stall, krylov_stall_direct=4))
+    stalls = sum("stalled" in line and "fell back" in line for line in lines)
+    after = sum("after a stall" in line for line in lines)
+    assert stalls >= 1 and after >= 1 and stalls <= after
+    assert np.abs(reactions(stay) - a).max() <= 1e-8 * np.abs(a).max()
 
 
 def test_krylov_path_solves_the_fitted_steel_chain_and_falls_back_when_stalled(tmp_path):
@@ -127,7 +134,7 @@ def test_krylov_path_solves_the_fitted_steel_chain_and_falls_back_when_stalled(t
     solves = [line for line in lines if line.startswith("linear: gmres")]
     assert len(solves) == newton_iterations(krylov)
     assert sum("preconditioner kept" in line for line in solves) > len(solves) // 2
-    stall = replace(KRYLOV, krylov_max_iterations=2, krylov_refresh=2)
+    stall = replace(KRYLOV, krylov_max_iterations=2, krylov_refresh=2, krylov_stall_direct=0)
     fallen, lines = solve(case, 0, "nurbs_fit", tmp_path / "stalled", stall)
     assert sum("fell back to saddle-" in line for line in lines) >= newton_iterations(fallen) // 2
     c = reactions(fallen)

@@ -12,7 +12,7 @@ import scipy.sparse as sp
 
 from tests.support import elasticity_fixture as fx
 from cgfem.solve.krylov import AMGPreconditioner, krylov_solve
-from cgfem.solve.linear import mode_bodies, rigid_body_modes
+from cgfem.solve.linear import available_backends, mode_bodies, rigid_body_modes
 from cgfem.solve.multigrid import smoothed_aggregation, v_cycle
 from cgfem.solve.policy import SolverPolicy
 from cgfem.solve.solves import DIRECT, KRYLOV, LinearSolves
@@ -180,6 +180,30 @@ def test_stalled_solve_falls_back_to_a_factorization():
     assert any("stalled" in line and "fell back" in line for line in lines)
     solves(K, 2 * b)
     assert solves.history[-1][2] == "fallback kept"
+
+
+@pytest.mark.parametrize("stay", [0, 2])
+def test_after_a_stall_the_next_matrices_are_factorized_directly(stay):
+    """After a stalled solve (every Krylov solve here stalls: 2 iterations allowed) the next
+    ``krylov_stall_direct`` new matrices are factorized without a Krylov attempt, the
+    analysis of each kept for the next; the one after them tries Krylov again."""
+    mats = [two_bodies(False, c, seed=k)[0] for k, c in enumerate((1.0, 1.1, 1.2, 1.3))]
+    _, b, B = two_bodies(False)
+    lines: list[str] = []
+    solves = LinearSolves("auto", B, False, log=lines.append,
+                          policy=policy(krylov_max_iterations=2, krylov_refresh=2, krylov_stall_direct=stay))
+    notes, analysed = [], []
+    for K in mats:
+        x = solves(K, b)
+        assert np.linalg.norm(K @ x - b) <= 1e-8 * np.linalg.norm(b)
+        notes.append(solves.history[-1][2])
+        analysed.append(solves._factor.info.get("analysed"))
+    expected = ["fallback", "after a stall", "after a stall", "fallback"] if stay == 2 else ["fallback"] * 4
+    assert notes == expected
+    if stay and "pardiso" in available_backends():
+        assert analysed == [True, False, False, True]       # the same pattern: analysed once
+    if stay:
+        assert any("after a stall (0 more matrices)" in line for line in lines)
 
 
 def test_direct_below_the_size_thresholds_and_for_saddle_points_not_given():

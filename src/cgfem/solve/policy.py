@@ -101,6 +101,10 @@ class SolverPolicy:
         :meth:`~cgfem.solve.solves.LinearSolves.kept_limit`).
     krylov_max_iterations : iterations after which a Krylov solve with a fresh
         preconditioner is stalled: the system is then factorized directly (logged).
+    krylov_stall_direct : after a stalled Krylov solve this many further matrices are
+        factorized directly (the analysis of each kept for the next) instead of stalling in
+        turn: the matrices after a stall are alike (chain3 at level 3 with ``facets`` stalled
+        on four matrices in a row, 440 iterations and a factorization each).
     krylov_rtol : the tightest relative residual a Krylov solve is asked for (inexact Newton
         asks for looser ones).
     """
@@ -132,6 +136,7 @@ class SolverPolicy:
     krylov_refresh: int = 40
     krylov_refresh_rate: float = 1.5
     krylov_max_iterations: int = 400
+    krylov_stall_direct: int = 4
     krylov_rtol: float = 1e-10
 
     def __post_init__(self) -> None:

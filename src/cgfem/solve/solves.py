@@ -18,7 +18,8 @@
   preconditioner needed more per decade of residual: the elements of order 2); past that
   the solve is repeated with a preconditioner
   of the current matrix, and a solve that stalls even then (``policy.krylov_max_iterations``)
-  falls back to a factorization of that matrix (a saddle point's reduced one). The tolerance is inexact Newton's
+  falls back to a factorization of that matrix (a saddle point's reduced one), and of the
+  next ``policy.krylov_stall_direct`` matrices too. The tolerance is inexact Newton's
   (:func:`cgfem.solve.newton.forcing_rtol`), never tighter than ``policy.krylov_rtol``.
 
 Every choice is logged: the path and backend once, and per Krylov solve its iterations and
@@ -84,6 +85,8 @@ class LinearSolves:
         #: iterations per decade of residual of the last solve with a fresh preconditioner
         self._per_decade: float | None = None
         self._logged = False
+        #: matrices still to factorize directly after a stall (``policy.krylov_stall_direct``)
+        self._direct_left = 0
         self._n = None
         #: per solve: (path, iterations, what happened) for the benchmarks and the tests
         self.history: list[tuple[str, int, str]] = []
@@ -139,7 +142,14 @@ class LinearSolves:
         if K is None or (self.frozen and self._key is not None):
             K = self._key
         if K is not self._key:
+            previous = self._factor
             self._key, self._factor, self._fresh = K, None, False
+            if self._direct_left > 0:       # a stall not long ago: factorized as well
+                self._direct_left -= 1
+                self._factor = self._factorize(K, previous)
+                self.history.append((DIRECT, 0, "after a stall"))
+                self.log(f"linear: {self._factor.backend} after a stall ({self._direct_left} more matrices)")
+                return self._factor.solve(b)
         if self._factor is not None:        # this matrix was factorized after a stall
             self.history.append((DIRECT, 0, "fallback kept"))
             return self._factor.solve(b)
@@ -175,17 +185,23 @@ class LinearSolves:
             self.log(f"linear: {kind} {total} iterations to {res:.1e} (target {target:.1e}; preconditioner "
                      f"{note}; {time.perf_counter() - tic:.2f} s)")
             return x
+        self._factor = self._factorize(K, None)
+        self._direct_left = p.krylov_stall_direct
+        self.history.append((DIRECT, total, "fallback"))
+        self.log(f"linear: {kind} stalled at {res:.1e} after {total} iterations (target {target:.1e}; {note}); "
+                 f"fell back to {self._factor.backend} for this matrix and the next {self._direct_left}")
+        return self._factor.solve(b)
+
+    def _factorize(self, K: sp.csr_matrix, previous) -> linear.LinearSolver:
+        """The Krylov path's direct solver of ``K`` (after a stall): PARDISO (else SuperLU),
+        for a saddle point on its reduced matrix; ``previous``: the last such solver, whose
+        analysis it may take (:func:`cgfem.solve.backends.factorize`)."""
         direct = "pardiso" if "pardiso" in linear.available_backends() else "superlu"
         if self.saddle is not None:
             # the saddle point's reduced matrix factorized as its preconditioner
-            self._factor = reduced_saddle(K, self.saddle[0], self.saddle[1], self.symmetric, self.near_null,
-                                          preconditioner=direct)
-        else:
-            self._factor = factorize(K, backend=direct, symmetric=self.symmetric)
-        self.history.append((DIRECT, total, "fallback"))
-        self.log(f"linear: {kind} stalled at {res:.1e} after {total} iterations (target {target:.1e}; {note}); "
-                 f"fell back to {self._factor.backend} for this matrix")
-        return self._factor.solve(b)
+            return reduced_saddle(K, self.saddle[0], self.saddle[1], self.symmetric, self.near_null,
+                                  preconditioner=direct, reuse=previous)
+        return factorize(K, backend=direct, symmetric=self.symmetric, reuse=previous)
 
     def kept_limit(self, target: float) -> int:
         """The iterations a solve to the relative residual ``target`` may take with a kept
