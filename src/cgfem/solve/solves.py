@@ -195,7 +195,7 @@ class LinearSolves:
                  f"fell back to {self._factor.backend} for this matrix and the next {self._direct_left}")
         return self._factor.solve(b)
 
-    def _factorize(self, K: sp.csr_matrix, previous) -> linear.LinearSolver:
+    def _factorize(self, K: sp.csr_matrix, previous: linear.LinearSolver | None) -> linear.LinearSolver:
         """The Krylov path's direct solver of ``K`` (after a stall): PARDISO (else SuperLU),
         for a saddle point on its reduced matrix; ``previous``: the last such solver, whose
         analysis it may take (:func:`cgfem.solve.backends.factorize`)."""
