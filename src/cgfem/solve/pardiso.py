@@ -87,8 +87,9 @@ class PardisoPattern:
     -2 the upper triangle with its diagonal) of ``n`` rows. :meth:`factorize` takes values on
     that pattern; :meth:`within` maps a matrix onto it. Freed with the object (phase -1).
 
-    ``library``: MKL's runtime (``ctypes.CDLL``); ``threads``: the reproducibility mode's.
-    Raises :class:`PardisoError` if the analysis fails."""
+    ``data`` (nnz,): the values on the pattern the analysis sees (type 11's matching and
+    scaling read them); ``library``: MKL's runtime (``ctypes.CDLL``); ``threads``: the
+    reproducibility mode's. Raises :class:`PardisoError` if the analysis fails."""
 
     def __init__(self, library: ctypes.CDLL, mtype: int, indptr: np.ndarray, indices: np.ndarray,
                  data: np.ndarray, threads: int) -> None:
