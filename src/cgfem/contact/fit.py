@@ -316,9 +316,10 @@ def band_order(n_u: int, n_v: int, degree: tuple[int, int], M: sp.spmatrix | Non
     transposed = natural.reshape(n_u, n_v).T.ravel()
     if M is None:
         return natural if p * n_v + q <= q * n_u + p else transposed
-    pattern = sp.csr_matrix(M)
-    candidates = (natural, transposed, reverse_cuthill_mckee(pattern, symmetric_mode=True).astype(np.int64))
-    return min(candidates, key=lambda perm: bandwidth(pattern, perm))
+    A = sp.coo_matrix(M)
+    candidates = (natural, transposed,
+                  reverse_cuthill_mckee(sp.csr_matrix(M), symmetric_mode=True).astype(np.int64))
+    return min(candidates, key=lambda perm: bandwidth(A, perm))
 
 
 def bandwidth(M: sp.spmatrix, perm: np.ndarray) -> int:

@@ -28,7 +28,6 @@ from __future__ import annotations
 import ctypes
 import functools
 import importlib
-import os
 import time
 from typing import Any, Callable
 
@@ -37,7 +36,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from cgfem.solve.multigrid import smoothed_aggregation, v_cycle
-from cgfem.solve.pardiso import PardisoError, PardisoPattern, positions_within, union_pattern
+from cgfem.solve.pardiso import PardisoError, PardisoPattern, union_pattern, values_on
 
 BACKENDS = ("superlu", "pyamg", "pardiso")
 DIRECT_CHECK = 1e-8  #: relative residual a direct solve must reach
@@ -230,17 +229,15 @@ class _Pardiso(_DirectSolver):
         self._matvec = A.dot  # the check uses all of A, not just its upper half
         threads = mkl_threads() or 1
         pattern = reuse._take(mtype, self.n) if isinstance(reuse, _Pardiso) else None
-        analysed = pattern is None
         try:
             data = None if pattern is None else pattern.within(M.indptr, M.indices, M.data)
-            if data is None:
+            analysed = data is None
+            if analysed:
                 indptr, indices, data = M.indptr, M.indices, M.data
                 if pattern is not None:   # entries outside the pattern: analyse the union
                     indptr, indices = union_pattern(pattern.indptr, pattern.indices, M.indptr, M.indices)
                     del pattern           # its memory first
-                    data = np.zeros(indices.size)
-                    data[positions_within(M.indptr, M.indices, indptr, indices)] = M.data
-                    analysed = True
+                    data = values_on(indptr, indices, M.indptr, M.indices, M.data)
                 pattern = PardisoPattern(_mkl_library(), mtype, indptr, indices, data, threads)
             pattern.factorize(data)
         except PardisoError as exc:

@@ -81,6 +81,21 @@ def union_pattern(a_indptr: np.ndarray, a_indices: np.ndarray, b_indptr: np.ndar
     return indptr, indices[:m].copy()
 
 
+def values_on(indptr: np.ndarray, indices: np.ndarray, sub_indptr: np.ndarray, sub_indices: np.ndarray,
+              sub_data: np.ndarray) -> np.ndarray | None:
+    """The values (nnz,) on the CSR pattern (``indptr``, ``indices``) of the CSR matrix
+    (``sub_indptr``, ``sub_indices``, ``sub_data``; sorted columns), zero where it has no
+    entry; None if it has another number of rows or an entry outside the pattern."""
+    if sub_indptr.size != indptr.size:
+        return None
+    where = positions_within(sub_indptr, sub_indices, indptr, indices)
+    if where.size != sub_indices.size:
+        return None
+    values = np.zeros(indices.size)
+    values[where] = sub_data
+    return values
+
+
 class PardisoPattern:
     """One PARDISO instance (its internal memory ``pt``) of matrix type ``mtype`` analysed
     on a CSR pattern (``indptr``, ``indices``: sorted columns, every row nonempty, for type
@@ -104,7 +119,7 @@ class PardisoPattern:
                             ctypes.byref(_INT(self.mtype)), self.iparm.ctypes.data_as(_INT_P))
         self.iparm[33] = threads      # iparm(34): reproducible with this many threads
         self.iparm[34] = 1            # iparm(35): zero-based indices
-        self._data = np.zeros(self.indices.size)
+        self._data: np.ndarray | None = None     # the values last factorized
         weakref.finalize(self, _release, self._call, self.pt, self.iparm, self.mtype, self.n)
         #: whether :meth:`factorize` has run (:meth:`solve` needs it)
         self.factorized = False
@@ -116,17 +131,8 @@ class PardisoPattern:
         return int(self.indices.size)
 
     def within(self, indptr: np.ndarray, indices: np.ndarray, data: np.ndarray) -> np.ndarray | None:
-        """The values (nnz,) on this pattern of the CSR matrix (``indptr``, ``indices``,
-        ``data``; sorted columns, ``n`` rows), zero where it has no entry; None if it has
-        an entry outside the pattern."""
-        if indptr.size != self.indptr.size:
-            return None
-        where = positions_within(indptr, indices, self.indptr, self.indices)
-        if where.size != indices.size:
-            return None
-        values = np.zeros(self.nnz)
-        values[where] = data
-        return values
+        """:func:`values_on` this pattern of the CSR matrix (``indptr``, ``indices``, ``data``)."""
+        return values_on(self.indptr, self.indices, indptr, indices, data)
 
     def factorize(self, data: np.ndarray) -> None:
         """Numerical factorization (phase 22) of the values ``data`` (nnz,) on the pattern."""
@@ -155,27 +161,30 @@ class PardisoPattern:
 
     def _phase(self, phase: int, data: np.ndarray, b: np.ndarray | None = None,
                x: np.ndarray | None = None) -> None:
-        b = np.zeros(1) if b is None else b
-        x = np.zeros(1) if x is None else x
-        error = _INT(0)
-        self._call(self.pt.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)), ctypes.byref(_INT(1)),
-                   ctypes.byref(_INT(1)), ctypes.byref(_INT(self.mtype)), ctypes.byref(_INT(phase)),
-                   ctypes.byref(_INT(self.n)), data.ctypes.data_as(_DOUBLE_P),
-                   self.indptr.ctypes.data_as(_INT_P), self.indices.ctypes.data_as(_INT_P),
-                   None, ctypes.byref(_INT(1)), self.iparm.ctypes.data_as(_INT_P),
-                   ctypes.byref(_INT(0)), b.ctypes.data_as(_DOUBLE_P), x.ctypes.data_as(_DOUBLE_P),
-                   ctypes.byref(error))
-        if error.value != 0:
-            raise PardisoError(f"phase {phase} returned error {error.value}")
+        error = _pardiso(self._call, self.pt, self.iparm, self.mtype, phase, self.n, data, self.indptr,
+                         self.indices, b, x)
+        if error != 0:
+            raise PardisoError(f"phase {phase} returned error {error}")
+
+
+def _pardiso(call, pt: np.ndarray, iparm: np.ndarray, mtype: int, phase: int, n: int, data: np.ndarray,
+             indptr: np.ndarray, indices: np.ndarray, b: np.ndarray | None = None,
+             x: np.ndarray | None = None) -> int:
+    """One ``pardiso`` call (one matrix, one right-hand side, no user permutation, silent):
+    PARDISO's error code."""
+    b = np.zeros(1) if b is None else b
+    x = np.zeros(1) if x is None else x
+    error = _INT(0)
+    one = ctypes.byref(_INT(1))
+    call(pt.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)), one, one, ctypes.byref(_INT(mtype)),
+         ctypes.byref(_INT(phase)), ctypes.byref(_INT(n)), data.ctypes.data_as(_DOUBLE_P),
+         indptr.ctypes.data_as(_INT_P), indices.ctypes.data_as(_INT_P), None, one,
+         iparm.ctypes.data_as(_INT_P), ctypes.byref(_INT(0)), b.ctypes.data_as(_DOUBLE_P),
+         x.ctypes.data_as(_DOUBLE_P), ctypes.byref(error))
+    return int(error.value)
 
 
 def _release(call, pt: np.ndarray, iparm: np.ndarray, mtype: int, n: int) -> None:
     """Phase -1: PARDISO frees the memory of ``pt``."""
-    error = _INT(0)
-    dummy = np.zeros(1)
     index = np.zeros(1, np.int32)
-    call(pt.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)), ctypes.byref(_INT(1)), ctypes.byref(_INT(1)),
-         ctypes.byref(_INT(mtype)), ctypes.byref(_INT(-1)), ctypes.byref(_INT(n)),
-         dummy.ctypes.data_as(_DOUBLE_P), index.ctypes.data_as(_INT_P), index.ctypes.data_as(_INT_P),
-         None, ctypes.byref(_INT(1)), iparm.ctypes.data_as(_INT_P), ctypes.byref(_INT(0)),
-         dummy.ctypes.data_as(_DOUBLE_P), dummy.ctypes.data_as(_DOUBLE_P), ctypes.byref(error))
+    _pardiso(call, pt, iparm, mtype, -1, n, np.zeros(1), index, index)
