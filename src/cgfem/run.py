@@ -61,6 +61,19 @@ KRYLOV_MEMORY = {1: 0.45, 2: 0.65}
 #: torus at order 2 peaked at 3.19 GiB against 8.0 at level 2 (0.40) and at 14.7 GiB against
 #: 42.3 at level 3 (0.35); order 1 keeps the contact factor (no measurement at Krylov sizes)
 KRYLOV_MEMORY_NO_CONTACT = {1: 0.45, 2: 0.45}
+#: the least Krylov-path factor of a case with a body held by contact alone: its stalled
+#: Krylov solves are factorized directly (``krylov_stall_direct``), the AMG hierarchy dropped
+#: first; chain3 at level 3 with ``facets`` peaked at 8.85 GiB against 13.8 (0.64)
+KRYLOV_FALLBACK_MEMORY = 0.7
+#: the Krylov path's factor for a fitted surface (``nurbs_fit``: fit rows, patch matrices
+#: and their band factors besides the AMG hierarchy), per element order: chain2_steel at
+#: level 3 peaked at 4.8 GiB against 7.05 (0.68), planar at 6.3 against 19.2 (0.33); 1 (the
+#: factorization's) where a body is held by contact alone (chain3 at level 3: 11.7 against
+#: 13.8, with direct fallbacks of the reduced saddle) and at order 2 (not measured)
+KRYLOV_FIT_MEMORY = {1: 0.75, 2: 1.0}
+#: what every run holds besides its grids and systems: the interpreter, numpy, scipy, numba
+#: and MKL (about 0.3-0.4 GiB), added by :func:`run_memory`
+BASE_MEMORY = 512 * 2**20
 
 
 #: the environment variables that set the thread counts of numba, OpenMP, MKL and OpenBLAS
@@ -107,9 +120,10 @@ def estimate_memory(case: Case, level: int, measures: dict[str, tuple[float, flo
     elements ~ 2 A / h^2, ``order^3`` nodes per element; and whether the Newton systems take
     the Krylov path (:func:`~cgfem.solve.solves.solve_path`), whose estimate is
     :data:`KRYLOV_MEMORY` (:data:`KRYLOV_MEMORY_NO_CONTACT` without contact) times the
-    factorization's, but for a fitted ``surface`` (``nurbs_fit``): its fit rows and patch
-    matrices keep the factorization's estimate on either path (chain2_steel at level 3 peaked
-    at 4.8 GiB on the Krylov path, ``nurbs_fe`` at 2.6 GiB)."""
+    factorization's, at least :data:`KRYLOV_FALLBACK_MEMORY` times it where a body is held by
+    contact alone (stalled solves factorized); for a fitted ``surface`` (``nurbs_fit``),
+    whose fit rows and patch matrices the Krylov path keeps too, :data:`KRYLOV_FIT_MEMORY`
+    times it, or all of it where a body is held by contact alone."""
     total, dofs = 0.0, 0
     for body in case.bodies:
         h = body.grid.h(level)
@@ -119,9 +133,24 @@ def estimate_memory(case: Case, level: int, measures: dict[str, tuple[float, flo
         dofs += int(3 * order**3 * (inside + cut))
     fitted = surface_definition(surface).fitted
     krylov = solve_path(case.solver.linear, dofs, policy, fitted, case.held_by_contact_alone, order) == KRYLOV
-    if krylov and not fitted:
-        total *= (KRYLOV_MEMORY if case.contact else KRYLOV_MEMORY_NO_CONTACT)[order]
+    if krylov:
+        floating = case.held_by_contact_alone
+        if fitted:
+            factor = 1.0 if floating else KRYLOV_FIT_MEMORY[order]
+        else:
+            factor = (KRYLOV_MEMORY if case.contact else KRYLOV_MEMORY_NO_CONTACT)[order]
+            factor = max(factor, KRYLOV_FALLBACK_MEMORY) if floating else factor
+        total *= factor
     return int(total), dofs, krylov
+
+
+def run_memory(case: Case, level: int, surface: str, order: int = 1,
+               policy: SolverPolicy = DEFAULT_POLICY) -> int:
+    """Bytes a run of ``case`` will hold at most, by :func:`estimate_memory` plus
+    :data:`BASE_MEMORY`: what a scheduler reserves for it (the pipeline's ``mem_mb``). Builds
+    the bodies' B-rep (about 0.1 s per body), no grid."""
+    measures = {b.name: brep_measures(build_solid(b.geometry)) for b in case.bodies}
+    return estimate_memory(case, level, measures, order, surface, policy)[0] + BASE_MEMORY
 
 
 def check_memory(case: Case, level: int, measures: dict[str, tuple[float, float]],

@@ -156,3 +156,28 @@ def test_a_bad_config_is_refused(workdir, tmp_path):
     bad.write_text("surfaces: [facets, hexagons]\n")
     done = snakemake(workdir, "-n", "--configfile", str(bad))
     assert done.returncode != 0 and "hexagons" in done.stdout + done.stderr
+
+
+def test_runs_reserve_their_estimated_memory(workdir):
+    """Every run job of the extended configuration reserves ``mem_mb``, the run's own estimate
+    (``cgfem.run.run_memory``) in MB, at most the budget ``--resources mem_mb`` (a job above
+    it would never start)."""
+    from cgfem.case import load_case
+    from cgfem.run import run_memory
+    budget = 12_000
+    done = snakemake(workdir, "-n", "--forceall", "--configfile", "config/extended.yaml",
+                     "--resources", f"mem_mb={budget}")
+    assert done.returncode == 0, done.stderr + done.stdout
+    jobs = re.findall(r"rule (run_case\w*):\n(?:    .*\n)*?    wildcards: (.*)\n    resources: (.*)",
+                      done.stdout + done.stderr)
+    config = yaml.safe_load((REPO / "config" / "extended.yaml").read_text())
+    assert len([j for j in jobs if j[0] == "run_case"]) == expected_runs(config)
+    capped = 0
+    for _, wildcards, resources in jobs:
+        w = dict(item.split("=") for item in wildcards.split(", "))
+        case = load_case(REPO / config["examples"][w["case"]]["case"])
+        need = run_memory(case, int(w["level"]), w["surface"], int(w.get("order", 1))) // 10**6
+        reserved = int(re.search(r"mem_mb=(\d+)", resources)[1])
+        assert reserved == min(need, budget), wildcards
+        capped += need > budget
+    assert capped == 2          # chain3 at level 3, nurbs_fit (15 GB) and planar's

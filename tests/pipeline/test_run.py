@@ -161,9 +161,10 @@ def test_memory_estimate_follows_the_solve_path():
     unknowns) are estimated without a factorization's fill: ``KRYLOV_MEMORY`` times the
     direct path's estimate, per element order; chain2_steel at level 4 (1.2M unknowns, 41.7
     GiB direct) then fits 23 GiB. ``nurbs_fit`` takes the Krylov path from
-    ``SADDLE_DIRECT_DOFS`` unknowns on, with the direct path's estimate."""
+    ``SADDLE_DIRECT_DOFS`` unknowns on, with ``KRYLOV_FIT_MEMORY`` times the direct path's
+    estimate."""
     from cgfem.case import load_case
-    from cgfem.run import KRYLOV_MEMORY, estimate_memory
+    from cgfem.run import KRYLOV_FIT_MEMORY, KRYLOV_MEMORY, estimate_memory
     case = load_case(CASES / "chain2_steel.yaml")
     measures = {b.name: (4.93e-6, 2.13e-3) for b in case.bodies}     # a half torus link: V, A
     for order in (1, 2):
@@ -172,8 +173,10 @@ def test_memory_estimate_follows_the_solve_path():
         iterative, same, krylov = estimate_memory(case, 4, measures, order, "nurbs_fe")
         assert krylov and same == dofs >= 100_000
         assert iterative == pytest.approx(KRYLOV_MEMORY[order] * direct, rel=1e-9)
-        # nurbs_fit on the Krylov path: the direct estimate
-        assert estimate_memory(case, 4, measures, order, "nurbs_fit") == (direct, dofs, True)
+        # nurbs_fit on the Krylov path keeps its fit rows and patch matrices
+        fit = estimate_memory(case, 4, measures, order, "nurbs_fit")
+        assert fit[1:] == (dofs, True)
+        assert fit[0] == pytest.approx(KRYLOV_FIT_MEMORY[order] * direct, rel=1e-9) and fit[0] > iterative
     # a size below the Krylov threshold is the direct path's; nurbs_fit's has its own threshold
     small = estimate_memory(case, 0, measures, 1, "nurbs_fe")
     assert small[1] < 100_000 and not small[2]
@@ -181,7 +184,9 @@ def test_memory_estimate_follows_the_solve_path():
     sides = set()
     for level in (0, 1, 2, 3):
         direct, dofs, _ = estimate_memory(case, level, measures, 1, "nurbs_fe", DIRECT_ONLY)
-        assert estimate_memory(case, level, measures, 1, "nurbs_fit") == (direct, dofs, dofs >= least)
+        need, same, krylov = estimate_memory(case, level, measures, 1, "nurbs_fit")
+        assert (same, krylov) == (dofs, dofs >= least)
+        assert need == pytest.approx((KRYLOV_FIT_MEMORY[1] if krylov else 1.0) * direct, rel=1e-9)
         sides.add(dofs >= least)
     assert sides == {False, True}
 
@@ -239,6 +244,29 @@ def test_memory_estimate_without_contact_lets_the_bent_half_torus_run_order_2_at
     alone = estimate_memory(replace(chain, contact=()), 3, measures, 2)[0]
     assert alone == pytest.approx(KRYLOV_MEMORY_NO_CONTACT[2] * direct, rel=1e-9)
     assert KRYLOV_MEMORY_NO_CONTACT[2] < KRYLOV_MEMORY[2]
+
+
+#: measured peaks (GB, the largest process's resident set) of runs on the Krylov path at
+#: one thread: case, level, surface, GB (docs/performance.md, "Memory" and "The extended
+#: configuration"): chain3's two stalled runs factorized some systems directly
+MEASURED_PEAKS = [("chain3", 3, "facets", 9.5), ("chain3", 3, "nurbs_fit", 12.6),
+                  ("chain3", 3, "nurbs_fe", 6.7), ("chain2_steel", 3, "nurbs_fe", 2.8),
+                  ("chain2_steel", 3, "nurbs_fit", 5.2), ("planar", 3, "nurbs_fit", 6.8),
+                  ("planar", 3, "facets", 4.3)]
+
+
+def test_the_memory_a_run_reserves_bounds_its_measured_peak():
+    """``run_memory`` (the estimate plus the interpreter, what the pipeline reserves as
+    ``mem_mb``) is above every measured peak, and the two chain3 runs at level 3 that peaked
+    at 22 GB together reserve more than 23.5 GiB, so that they do not start together on the
+    machine they were measured on."""
+    from cgfem.case import load_case
+    from cgfem.run import run_memory
+    reserved = {}
+    for name, level, surface, peak in MEASURED_PEAKS:
+        reserved[name, surface] = run_memory(load_case(CASES / f"{name}.yaml"), level, surface)
+        assert reserved[name, surface] > peak * 1e9, (name, level, surface)
+    assert reserved["chain3", "facets"] + reserved["chain3", "nurbs_fit"] > 23.5 * 2**30
 
 
 def test_interrupted_run_whose_folder_was_removed_says_so(tmp_path):

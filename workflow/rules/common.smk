@@ -1,7 +1,12 @@
 # Configuration check and the helpers every rule file uses (no rules here).
+import functools
 import os
+from pathlib import Path
 
 from snakemake.utils import validate
+
+from cgfem.case import load_case
+from cgfem.run import machine_memory, run_memory
 
 
 validate(config, "../schemas/config.schema.yaml")
@@ -20,6 +25,31 @@ wildcard_constraints:
     level=r"\d+",
     surface="|".join(SURFACES),
     order="2",
+
+
+#: the memory (MB) the runs may hold at once: ``--resources mem_mb=N`` or, run on this
+#: machine (no --jobs for a cluster), its physical memory. Every run reserves its estimate
+#: (cgfem.run.run_memory), so that two large runs (chain3 at level 3 with nurbs_fit, 15 GB,
+#: and facets, 11 GB) do not start together on a 25 GB machine; on a cluster each job
+#: requests its own.
+_nodes = workflow.global_resources["_nodes"]
+if "mem_mb" not in workflow.global_resources and getattr(_nodes, "value", _nodes) is None:
+    workflow.register_resource("mem_mb", machine_memory() // 10**6)
+
+
+@functools.cache
+def _run_memory_mb(case, level, surface, order):
+    need = run_memory(load_case(Path(case)), level, surface, order) // 10**6
+    limit = workflow.global_resources.get("mem_mb")
+    limit = getattr(limit, "value", limit)
+    return int(need if limit is None else min(need, limit))
+
+
+def run_memory_mb(wildcards):
+    """The estimated memory (MB) of the run of ``wildcards`` (its order 1 unless it names
+    one), at most the budget."""
+    return _run_memory_mb(case_file(wildcards), int(wildcards.level), wildcards.surface,
+                          int(wildcards.get("order", 1)))
 
 
 def case_file(wildcards):

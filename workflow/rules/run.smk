@@ -17,6 +17,8 @@ rule run_case:
     benchmark:
         "results/benchmarks/runs/{case}/L{level}_{surface}.tsv"
     threads: 1
+    resources:
+        mem_mb=run_memory_mb,
     shell:
         "NUMBA_NUM_THREADS={threads} OMP_NUM_THREADS={threads} MKL_NUM_THREADS={threads} "
         "cgfem run {input.case} --level {wildcards.level} --surface {wildcards.surface} "
@@ -40,6 +42,8 @@ rule run_case_order:
     benchmark:
         "results/benchmarks/runs/{case}/L{level}_{surface}_o{order}.tsv"
     threads: 1
+    resources:
+        mem_mb=run_memory_mb,
     # started first: the longest jobs (in the smoke run it finished last, 13 s before the end)
     priority: 10
     shell:
