@@ -148,7 +148,7 @@ def run_memory(case: Case, level: int, surface: str, order: int = 1,
                policy: SolverPolicy = DEFAULT_POLICY) -> int:
     """Bytes a run of ``case`` will hold at most, by :func:`estimate_memory` plus
     :data:`BASE_MEMORY`: what a scheduler reserves for it (the pipeline's ``mem_mb``). Builds
-    the bodies' B-rep (about 0.1 s per body), no grid."""
+    the bodies' B-rep (about 5 ms per body), no grid."""
     measures = {b.name: brep_measures(build_solid(b.geometry)) for b in case.bodies}
     return estimate_memory(case, level, measures, order, surface, policy)[0] + BASE_MEMORY
 

@@ -32,16 +32,20 @@ wildcard_constraints:
 #: (cgfem.run.run_memory), so that two large runs (chain3 at level 3 with nurbs_fit, 15 GB,
 #: and facets, 11 GB) do not start together on a 25 GB machine; on a cluster each job
 #: requests its own.
-_nodes = workflow.global_resources["_nodes"]
-if "mem_mb" not in workflow.global_resources and getattr(_nodes, "value", _nodes) is None:
+def _global_resource(name):
+    """The value of the workflow's resource ``name`` (snakemake 9 wraps it), None if unset."""
+    value = workflow.global_resources.get(name)
+    return getattr(value, "value", value)
+
+
+if _global_resource("mem_mb") is None and _global_resource("_nodes") is None:
     workflow.register_resource("mem_mb", machine_memory() // 10**6)
 
 
 @functools.cache
 def _run_memory_mb(case, level, surface, order):
     need = run_memory(load_case(Path(case)), level, surface, order) // 10**6
-    limit = workflow.global_resources.get("mem_mb")
-    limit = getattr(limit, "value", limit)
+    limit = _global_resource("mem_mb")
     return int(need if limit is None else min(need, limit))
 
 
