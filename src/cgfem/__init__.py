@@ -17,12 +17,15 @@ embedding, elasticity, contact); the evidence in docs/validation.md.
 
 Importing the package first installs :mod:`cgfem._numba_cache`, which stamps every cached
 numba kernel with the sources of its module and of every ``cgfem`` module it imports (so a
-cached kernel never runs an outdated callee of another module).
+cached kernel never runs an outdated callee of another module), and
+:mod:`cgfem._numba_calls`, which types calls between the package's kernels on non-literal
+argument types (one compiled version per argument type, not one per constant passed).
 """
 
-from cgfem import _numba_cache
+from cgfem import _numba_cache, _numba_calls
 
 _numba_cache.install()
+_numba_calls.install()
 
 from cgfem.errors import InputError  # noqa: E402  (after the cache locator, on purpose)
 

@@ -495,6 +495,9 @@ def partition_piece(pnet, origin, h, shape, origin2, h2, GX, GW, rule, max_depth
     """
     p = pnet.shape[0] - 1
     q = pnet.shape[1] - 1
+    # writable copies of both orientations (the given net may be read-only): one compiled
+    # version of _integrate_cell serves both
+    pnW = pnet.copy()
     pnT = np.ascontiguousarray(pnet.transpose(1, 0, 2))
     cap = 2 * max_depth + 8
     nets = np.empty((cap, p + 1, q + 1, 4))
@@ -547,13 +550,13 @@ def partition_piece(pnet, origin, h, shape, origin2, h2, GX, GW, rule, max_depth
             continue
         if not too_many:
             if _classify(cnet, fk, fc, nf, 1, kinds):
-                _integrate_cell(pnet, pnet, cnet, sa, sb, ta, tb, False, fk, fc, fplane, kinds, nf,
+                _integrate_cell(pnW, pnW, cnet, sa, sb, ta, tb, False, fk, fc, fplane, kinds, nf,
                                 origin, h, shape, GX, GW, rule, out_st, out_x, out_w, out_n, out_e,
                                 trim_x, trim_w, trim_m, trim_axis, trim_plane, trim_st, counts)
                 continue
             if _classify(cnet, fk, fc, nf, 0, kinds):
                 onet = np.ascontiguousarray(cnet.transpose(1, 0, 2))
-                _integrate_cell(pnet, pnT, onet, ta, tb, sa, sb, True, fk, fc, fplane, kinds, nf,
+                _integrate_cell(pnW, pnT, onet, ta, tb, sa, sb, True, fk, fc, fplane, kinds, nf,
                                 origin, h, shape, GX, GW, rule, out_st, out_x, out_w, out_n, out_e,
                                 trim_x, trim_w, trim_m, trim_axis, trim_plane, trim_st, counts)
                 continue
