@@ -14,7 +14,7 @@ import signal
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import numba
 import numpy as np
@@ -35,7 +35,7 @@ from cgfem.fem.materials import von_mises
 from cgfem.fem import spr
 from cgfem.fem.spr import energy_norm, zz_estimate
 from cgfem.geometry.builders import build_solid
-from cgfem.geometry.measure import areas_by_name, volume
+from cgfem.geometry.measure import areas_by_name, projected_area, volume
 from cgfem.results import clear_previous, write_json_atomic, write_step
 from cgfem.solve.linear import available_backends, mkl_threads
 from cgfem.solve.static import StepRecord, solve_static
@@ -48,6 +48,11 @@ from cgfem.solve.system import System
 #: PARDISO, an upper bound of its peak; docs/performance.md)
 BYTES_PER_ELEMENT = 90_000
 BYTES_PER_CUT_ELEMENT = 180_000
+#: cut elements per ``P / h^2`` (``P`` the boundary's projected area,
+#: :func:`~cgfem.geometry.measure.projected_area`): measured 1.00 on planar's boxes and
+#: 1.00-1.02 on the chain links at levels 0-3; the estimate takes sqrt(2), which on a link
+#: (``P = sqrt(2) A``) is the ``2 A / h^2`` the byte constants were calibrated with
+CUT_ELEMENTS_PER_PROJECTED_AREA = 2.0 ** 0.5
 #: the memory of an element of each order relative to the trilinear one: 3.4 times the dofs,
 #: 11 times the scatter map and the element matrices, more fill
 ORDER_MEMORY = {1: 1.0, 2: 12.0}
@@ -69,8 +74,15 @@ KRYLOV_FALLBACK_MEMORY = 0.7
 #: and their band factors besides the AMG hierarchy), per element order: chain2_steel at
 #: level 3 peaked at 4.8 GiB against 7.05 (0.68), planar at 6.3 against 19.2 (0.33); 1 (the
 #: factorization's) where a body is held by contact alone (chain3 at level 3: 11.7 against
-#: 13.8, with direct fallbacks of the reduced saddle) and at order 2 (not measured)
+#: 13.8, with direct fallbacks of the reduced saddle) and at order 2 (chain2_steel at level 1
+#: peaked at 3.77 GB against 3.63 and 0.54 for the interpreter; planar at level 2 at 20.4
+#: against 36.5, which this factor therefore refuses on a 25 GB machine)
 KRYLOV_FIT_MEMORY = {1: 0.75, 2: 1.0}
+#: the direct path's factor for a fitted surface (its fit rows, patch matrices and band
+#: factors, and the reduced saddle solver's preconditioner factor): chain3 at level 1 peaked
+#: at 1.19 GB against 0.59 (and 0.54 for the interpreter), the chains at order 2, level 0 at
+#: 0.93 of what a factor of 1 reserves
+DIRECT_FIT_MEMORY = 1.25
 #: what every run holds besides its grids and systems: the interpreter, numpy, scipy, numba
 #: and MKL (about 0.3-0.4 GiB), added by :func:`run_memory`
 BASE_MEMORY = 512 * 2**20
@@ -108,27 +120,37 @@ def machine_memory() -> int:
     return 16 * 2**30
 
 
-def brep_measures(solid) -> tuple[float, float]:
-    """B-rep volume and total area of ``solid``."""
-    return volume(solid), float(sum(areas_by_name(solid).values()))
+class BrepMeasures(NamedTuple):
+    """A solid's B-rep volume, boundary area and projected area
+    (:func:`~cgfem.geometry.measure.projected_area`), in m^3 and m^2."""
+
+    volume: float
+    area: float
+    projected: float
 
 
-def estimate_memory(case: Case, level: int, measures: dict[str, tuple[float, float]], order: int = 1,
+def brep_measures(solid) -> BrepMeasures:
+    """The :class:`BrepMeasures` of ``solid``."""
+    return BrepMeasures(volume(solid), float(sum(areas_by_name(solid).values())), projected_area(solid))
+
+
+def estimate_memory(case: Case, level: int, measures: dict[str, BrepMeasures], order: int = 1,
                     surface: str = "nurbs_fe", policy: SolverPolicy = DEFAULT_POLICY) -> tuple[int, int, bool]:
     """Estimated bytes and DOFs of ``case`` at ``level`` with elements of ``order`` from the
-    B-rep volume and area of every body (``measures``): inside elements ~ V / h^3, cut
-    elements ~ 2 A / h^2, ``order^3`` nodes per element; and whether the Newton systems take
-    the Krylov path (:func:`~cgfem.solve.solves.solve_path`), whose estimate is
-    :data:`KRYLOV_MEMORY` (:data:`KRYLOV_MEMORY_NO_CONTACT` without contact) times the
-    factorization's, at least :data:`KRYLOV_FALLBACK_MEMORY` times it where a body is held by
+    B-rep measures of every body (``measures``): inside elements ~ V / h^3, cut elements
+    ~ :data:`CUT_ELEMENTS_PER_PROJECTED_AREA` P / h^2, ``order^3`` nodes per element; and
+    whether the Newton systems take the Krylov path (:func:`~cgfem.solve.solves.solve_path`),
+    whose estimate is :data:`KRYLOV_MEMORY` (:data:`KRYLOV_MEMORY_NO_CONTACT` without
+    contact) times the factorization's, at least :data:`KRYLOV_FALLBACK_MEMORY` times it where a body is held by
     contact alone (stalled solves factorized); for a fitted ``surface`` (``nurbs_fit``),
     whose fit rows and patch matrices the Krylov path keeps too, :data:`KRYLOV_FIT_MEMORY`
-    times it, or all of it where a body is held by contact alone."""
+    times it, or all of it where a body is held by contact alone; on the direct path
+    :data:`DIRECT_FIT_MEMORY` times it."""
     total, dofs = 0.0, 0
     for body in case.bodies:
         h = body.grid.h(level)
-        v, a = measures[body.name]
-        inside, cut = v / h**3, 2.0 * a / h**2
+        m = measures[body.name]
+        inside, cut = m.volume / h**3, CUT_ELEMENTS_PER_PROJECTED_AREA * m.projected / h**2
         total += ORDER_MEMORY[order] * (BYTES_PER_ELEMENT * inside + BYTES_PER_CUT_ELEMENT * cut)
         dofs += int(3 * order**3 * (inside + cut))
     fitted = surface_definition(surface).fitted
@@ -141,6 +163,8 @@ def estimate_memory(case: Case, level: int, measures: dict[str, tuple[float, flo
             factor = (KRYLOV_MEMORY if case.contact else KRYLOV_MEMORY_NO_CONTACT)[order]
             factor = max(factor, KRYLOV_FALLBACK_MEMORY) if floating else factor
         total *= factor
+    elif fitted:
+        total *= DIRECT_FIT_MEMORY
     return int(total), dofs, krylov
 
 
@@ -153,7 +177,7 @@ def run_memory(case: Case, level: int, surface: str, order: int = 1,
     return estimate_memory(case, level, measures, order, surface, policy)[0] + BASE_MEMORY
 
 
-def check_memory(case: Case, level: int, measures: dict[str, tuple[float, float]],
+def check_memory(case: Case, level: int, measures: dict[str, BrepMeasures],
                  total: int | None = None, order: int = 1, surface: str = "nurbs_fe",
                  policy: SolverPolicy = DEFAULT_POLICY) -> None:
     """Refuse a level whose estimated memory (:func:`estimate_memory`, an upper bound;
@@ -234,7 +258,7 @@ def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None
             "h": model.space.h, "ghost_penalty": model.gamma,
             "kappa_dirichlet": model.kappa_dirichlet,
             "volume": float(emb.volume.w.sum()), "area": float(emb.surface.w.sum()),
-            "brep_volume": brep[body.name][0], "brep_area": brep[body.name][1]}
+            "brep_volume": brep[body.name].volume, "brep_area": brep[body.name].area}
         log(f"body {body.name}: {model.space.n_nodes} nodes, {model.n_dofs} dofs, "
             f"{int(model.space.cut.sum())} cut elements ({time.perf_counter() - tic:.2f} s)")
     return models, measures, solids

@@ -10,7 +10,7 @@ import pytest
 
 from cgfem.geometry.builders import (box, build_solid, cylinder, half_cylinder, half_torus, sphere,
                                     torus)
-from cgfem.geometry.measure import areas_by_name, volume
+from cgfem.geometry.measure import areas_by_name, projected_area, volume
 from cgfem.geometry.specs import (PATCH_NAMES, BoxSpec, CylinderSpec, HalfCylinderSpec, HalfTorusSpec,
                                   SphereSpec, TorusSpec)
 from cgfem.geometry.watertight import check_watertight
@@ -269,6 +269,20 @@ def test_box_measures(spec):
     for name, exact in (("xmin", dy * dz), ("xmax", dy * dz), ("ymin", dx * dz), ("ymax", dx * dz),
                         ("zmin", dx * dy), ("zmax", dx * dy)):
         assert close(areas[name], exact)
+
+
+@pytest.mark.parametrize("spec", sphere_specs(), ids=ids(sphere_specs()))
+def test_sphere_projected_area(spec):
+    """``oint |n_x| + |n_y| + |n_z| dA`` of a sphere: twice its shadow on each coordinate
+    plane, ``6 pi r^2`` (its patch edges lie where the normal components change sign)."""
+    assert close(projected_area(sphere(spec)), 6.0 * math.pi * spec.radius**2)
+
+
+@pytest.mark.parametrize("spec", box_specs(), ids=ids(box_specs()))
+def test_box_projected_area_is_its_area(spec):
+    """Every face of an axis-aligned box has one unit normal component."""
+    solid = box(spec)
+    assert close(projected_area(solid), sum(areas_by_name(solid).values()))
 
 
 # -- names, dispatch, watertightness ----------------------------------------------------

@@ -63,6 +63,18 @@ def areas_by_name(solid: Solid, order: int = DEFAULT_ORDER) -> dict[str, float]:
     return areas
 
 
+def projected_area(solid: Solid, order: int = DEFAULT_ORDER) -> float:
+    """``\\oint (|n_x| + |n_y| + |n_z|) dA``: the boundary's area projected on the three
+    coordinate planes, the grid cells a surface crosses per ``h^2`` (``A`` for a face normal
+    to an axis, ``sqrt(3) A`` at most). The integrand has kinks where a normal component
+    changes sign, so the Gauss rule is accurate, not exact."""
+    total = 0.0
+    for patch in solid.patches:
+        rule = patch_rule(patch.surface, order)
+        total += float(np.sum(np.abs(rule.n).sum(axis=1) * rule.w))
+    return total
+
+
 def volume(solid: Solid, order: int = DEFAULT_ORDER) -> float:
     """Enclosed volume, ``1/3 \\oint (x - c) . n dA`` with ``c`` the control-point centroid
     (the shift keeps round-off small for solids far from the origin)."""
