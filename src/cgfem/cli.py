@@ -183,7 +183,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        status = run_case(case, args.level, args.surface, args.out, log, args.order)
+        status = run_case(case, args.level, args.surface, args.out, log, args.order,
+                          memory_check=args.memory_check)
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
@@ -239,6 +240,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="element order: 1, the trilinear hexahedron (default, the paper's), or 2, "
                           "the triquadratic one (27 nodes)")
     run.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    run.add_argument("--no-memory-check", dest="memory_check", action="store_false",
+                     help="run a level whose memory estimate (an upper bound, up to about twice the "
+                          "peak) exceeds this machine's memory")
     run.set_defaults(func=_cmd_run)
     warmup = sub.add_parser("warmup", help="compile and cache the numba kernels (two small contact "
                             "problems, every surface definition) before a batch of runs")

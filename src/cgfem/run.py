@@ -188,7 +188,8 @@ def check_memory(case: Case, level: int, measures: dict[str, BrepMeasures],
     if need > have:
         path = "Krylov path" if krylov else "direct solver"
         raise InputError("--level", f"level {level} needs about {_size(need)} "
-                         f"(~{dofs:.2g} DOFs, {path}), but this machine has {_size(have)}")
+                         f"(~{dofs:.2g} DOFs, {path}), but this machine has {_size(have)} "
+                         f"(an upper bound: --no-memory-check runs it anyway)")
 
 
 def _size(n_bytes: float) -> str:
@@ -233,17 +234,19 @@ def build_models(case: Case, level: int, surface: str, log: Callable[[str], None
 
 
 def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None], order: int = 1,
-                 policy: SolverPolicy = DEFAULT_POLICY) -> tuple[list, dict, dict]:
+                 policy: SolverPolicy = DEFAULT_POLICY, memory_check: bool = True) -> tuple[list, dict, dict]:
     """Embed and discretize every body with the element of ``order``: the models, per-body
     measures and the solids. A level whose memory estimate exceeds the machine's is refused
-    first (:func:`check_memory`; ``policy`` decides whether its systems take the Krylov path)."""
+    first (:func:`check_memory`; ``policy`` decides whether its systems take the Krylov path)
+    unless ``memory_check`` is False."""
     for i, spec in enumerate(case.contact):
         if spec.rule == "segmented" and not surface_definition(surface).exact_surface:
             raise InputError(f"contact[{i}].rule", "'segmented' needs a NURBS surface definition "
                                                    f"(--surface {' or '.join(NURBS_DEFINITIONS)}), not {surface}")
     solids = {b.name: build_solid(b.geometry) for b in case.bodies}
     brep = {name: brep_measures(solid) for name, solid in solids.items()}
-    check_memory(case, level, brep, order=order, surface=surface, policy=policy)
+    if memory_check:
+        check_memory(case, level, brep, order=order, surface=surface, policy=policy)
     finite = case.kinematics == "finite"
     models, measures = [], {}
     for body in case.bodies:
@@ -379,9 +382,11 @@ def _remove_created(created: list[Path]) -> None:
 
 def run_case(case: Case, level: int, surface: str, out: Path,
              log: Callable[[str], None] = lambda m: None, order: int = 1,
-             policy: SolverPolicy = DEFAULT_POLICY) -> RunStatus:
+             policy: SolverPolicy = DEFAULT_POLICY, memory_check: bool = True) -> RunStatus:
     """Solve ``case`` with the hexahedra of ``order`` (1 or 2) and write its results to ``out``;
-    ``policy``: the solver's tuning (:class:`~cgfem.solve.policy.SolverPolicy`).
+    ``policy``: the solver's tuning (:class:`~cgfem.solve.policy.SolverPolicy`);
+    ``memory_check``: refuse a level whose memory estimate exceeds the machine's
+    (:func:`check_memory`).
 
     Returns the run status (``converged``, ``outer_not_converged`` or ``failed``, see
     :mod:`cgfem.solve.static`; :data:`INTERRUPTED` when ``log`` raised
@@ -402,7 +407,7 @@ def run_case(case: Case, level: int, surface: str, out: Path,
     created = check_out(out)
     started = time.perf_counter()
     try:
-        models, measures, solids = build_bodies(case, level, surface, log, order, policy)
+        models, measures, solids = build_bodies(case, level, surface, log, order, policy, memory_check)
         try:
             out.mkdir(parents=True, exist_ok=True)
         except OSError as err:

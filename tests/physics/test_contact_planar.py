@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from cgfem.case import load_case
-from cgfem.run import build_models, run_case
+from cgfem.run import build_models, machine_memory, run_case
 from tests.support.paths import CASES
 
 #: every test here solves a whole problem
@@ -22,6 +22,9 @@ pytestmark = pytest.mark.slow
 
 CASE = CASES / "planar.yaml"
 RESULTANT = 2.0 * 1e12 * 0.01 ** 3 / 6.0 * 0.0025
+#: bytes the order-2 level-2 run with nurbs_fit needs: its measured peak (20.4 GB, one
+#: thread) and 10 % (docs/performance.md, "Memory")
+NURBS_FIT_LEVEL_2_PEAK = 22.5e9
 
 
 @pytest.mark.parametrize("surface", ["nurbs_fe", "facets"])
@@ -120,9 +123,16 @@ def test_floating_body_is_reported_with_a_vanishing_stabilizing_force(tmp_path):
 def test_order_2_contact_force_is_the_exact_resultant(tmp_path, surface, level):
     """With triquadratic hexahedra the NURBS definitions carry the lateral tractions' exact
     resultant too: the contact force balances the lower body's load to 1e-8 and that load is
-    the closed form to 1e-9 (measured at level 0: 1.4e-11 with nurbs_fe)."""
+    the closed form to 1e-9 (measured at level 0: 1.4e-11 with nurbs_fe; at level 2 3e-12 and
+    3e-11 with nurbs_fit). ``nurbs_fit`` at level 2 peaks at 20.4 GB, where the memory
+    estimate, which must also bound the order-2 chains' fitted runs, says 36.5 GB: it runs
+    without the memory check on a machine that holds the measured peak, and is skipped
+    elsewhere."""
+    beyond_estimate = (surface, level) == ("nurbs_fit", 2)
+    if beyond_estimate and machine_memory() < NURBS_FIT_LEVEL_2_PEAK:
+        pytest.skip("planar at order 2, level 2 with nurbs_fit peaks at 20.4 GB")
     case = load_case(CASE)
-    status = run_case(case, level, surface, tmp_path, order=2)
+    status = run_case(case, level, surface, tmp_path, order=2, memory_check=not beyond_estimate)
     assert status.status == "converged"
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["order"] == 2

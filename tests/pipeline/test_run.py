@@ -147,6 +147,20 @@ def test_memory_guard_message_names_the_need(tmp_path, capsys):
     assert "GiB" in err and "this machine has" in err and "DOFs" in err
 
 
+def test_no_memory_check_runs_a_level_the_estimate_refuses(tmp_path, monkeypatch, capsys):
+    """On a machine the estimate finds too small the level is refused (exit 2, one line naming
+    the way round, no folder); ``--no-memory-check`` runs it."""
+    import cgfem.run
+    monkeypatch.setattr(cgfem.run, "machine_memory", lambda: 2**20)
+    out = tmp_path / "o"
+    args = ["run", _write(tmp_path, LINK), "--level", "0", "--surface", "facets", "--out", str(out), "--quiet"]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--no-memory-check" in err[0] and not out.exists()
+    assert main(args + ["--no-memory-check"]) == 0
+    assert json.loads((out / "summary.json").read_text())["status"] == "converged"
+
+
 def test_memory_guard_compares_with_the_machine_not_the_free_memory():
     """A level is refused only when its estimate exceeds the machine's memory: in the pipeline
     the other runs hold memory while they last (planar at level 3 was refused with 17.6 GiB
