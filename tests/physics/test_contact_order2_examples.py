@@ -45,17 +45,22 @@ def test_two_link_chains_converge_and_balance(tmp_path, example, level, surface)
 
 
 #: chain3 with facets at order 2, level 0 (docs/validation.md, "Contact with triquadratic
-#: hexahedra"): the chorded tubes carry next to no force, link C hangs free and turns, and
-#: Newton stops on the free link's limited steps (30 iterations, or the line search) from load
-#: factor 0.875 on
-CHAIN3_FACETS_L0 = pytest.mark.xfail(strict=True, reason="link C hangs free; Newton stops from load 0.875")
+#: hexahedra"): the chorded tubes never touch, link C hangs free, and the run either stops
+#: on the free link's limited steps or reaches full load slack (no contact force), as at
+#: order 1 on level 0
+CHAIN3_FACETS_L0 = pytest.mark.xfail(strict=True, reason="link C hangs free: no contact force")
 THREE_LINK_RUNS = [pytest.param(level, surface, marks=CHAIN3_FACETS_L0 if (level, surface) == (0, "facets") else ())
                    for level in (0, 1) for surface in NAMES]
 
 
 @pytest.mark.parametrize("level, surface", THREE_LINK_RUNS)
 def test_three_link_chain_converges_and_the_middle_link_balances(tmp_path, level, surface):
-    step = _run(tmp_path, "chain3", level, surface)["steps"][-1]
+    summary = _run(tmp_path, "chain3", level, surface)
+    if level == 0 and surface != "facets":
+        # the middle link's soft turn is cut inside Newton's solve near the solution
+        # (policy.floating_rotation): no cut-back (it stalled at full load before)
+        assert len(summary["steps"]) == 1
+    step = summary["steps"][-1]
     pairs = step["contact"]["pairs"]
     # link_a (master) on link_c (slave), and link_c (master) on link_b (slave): on the middle
     # link the first and minus the second, whose sum vanishes

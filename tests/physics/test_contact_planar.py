@@ -22,9 +22,10 @@ pytestmark = pytest.mark.slow
 
 CASE = CASES / "planar.yaml"
 RESULTANT = 2.0 * 1e12 * 0.01 ** 3 / 6.0 * 0.0025
-#: bytes the order-2 level-2 run with nurbs_fit needs: its measured peak (20.4 GB, one
-#: thread) and 10 % (docs/performance.md, "Memory")
-NURBS_FIT_LEVEL_2_PEAK = 22.5e9
+#: bytes the order-2 level-2 run with nurbs_fit needs inside a test process: its peak alone
+#: is 20.4 GB (one thread; docs/performance.md, "Memory"), but the process also holds what
+#: earlier tests left (on a 25 GB machine it was killed for memory after the nurbs_fe run)
+NURBS_FIT_LEVEL_2_PEAK = 32e9
 
 
 @pytest.mark.parametrize("surface", ["nurbs_fe", "facets"])
@@ -126,11 +127,11 @@ def test_order_2_contact_force_is_the_exact_resultant(tmp_path, surface, level):
     the closed form to 1e-9 (measured at level 0: 1.4e-11 with nurbs_fe; at level 2 3e-12 and
     3e-11 with nurbs_fit). ``nurbs_fit`` at level 2 peaks at 20.4 GB, where the memory
     estimate, which must also bound the order-2 chains' fitted runs, says 36.5 GB: it runs
-    without the memory check on a machine that holds the measured peak, and is skipped
-    elsewhere."""
+    without the memory check where the machine holds that beside what earlier tests of the
+    process keep, and is skipped elsewhere."""
     beyond_estimate = (surface, level) == ("nurbs_fit", 2)
     if beyond_estimate and machine_memory() < NURBS_FIT_LEVEL_2_PEAK:
-        pytest.skip("planar at order 2, level 2 with nurbs_fit peaks at 20.4 GB")
+        pytest.skip("planar at order 2, level 2 with nurbs_fit needs about 32 GB in a test process")
     case = load_case(CASE)
     status = run_case(case, level, surface, tmp_path, order=2, memory_check=not beyond_estimate)
     assert status.status == "converged"

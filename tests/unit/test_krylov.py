@@ -375,3 +375,23 @@ def test_block_sweeps_do_pyamgs_block_gauss_seidel(symmetric):
     level.presmoother(level.A, ours, b)
     pyamg_sweep(level.A, theirs, b, sweep="symmetric", blocksize=level.A.blocksize[0])
     assert np.allclose(ours, theirs, rtol=0.0, atol=1e-13 * np.abs(theirs).max())
+
+
+def test_again_solves_another_right_hand_side_with_the_last_factorization():
+    """``again`` reuses the direct path's factorization of the last matrix for another
+    right-hand side (the floating bodies' cut rotations): the solution of that matrix, and
+    no new factorization; off the direct path it refuses."""
+    from cgfem.solve.linear import LinearSolverError
+    K, b, B = two_bodies(True)
+    n = K.shape[0]
+    solves = LinearSolves("auto", B, policy=replace(SolverPolicy(), krylov_min_dofs=n + 1))
+    solves(K, b)
+    factor = solves._factor
+    c = np.random.default_rng(3).standard_normal(n)
+    x = solves.again(c)
+    assert solves._factor is factor
+    assert np.linalg.norm(K @ x - c) <= 1e-10 * np.linalg.norm(c)
+    krylov = LinearSolves("auto", B, policy=policy())
+    krylov(K, b)
+    with pytest.raises(LinearSolverError):
+        krylov.again(c)

@@ -4,9 +4,11 @@ A body whose own conditions leave a rigid motion free (chain3's middle link in a
 planar example's lower block in two) has a singular tangent until contact holds it, and
 along a frictionless spin always. :class:`FloatingBodies` finds such bodies from their first
 tangent, adds a fading diagonal shift to the matrix Newton solves (never to the residual, so
-the converged state is that of the unstabilized equations), limits Newton's step so that no
-node of such a body moves more than ``floating_step`` element sizes nor turns it by more than
-about ``floating_turn`` radians, and adapts the shift to how often steps had to be limited
+the converged state is that of the unstabilized equations), near a solution cuts the
+rotation of such a body in a Newton step to ``floating_rotation`` by the step that minimizes
+Newton's model under that turn (:func:`bound_rotation`), limits the step so that no node of
+such a body moves more than ``floating_step`` element sizes nor turns it by more than about
+``floating_turn`` radians, and adapts the shift to how often steps had to be limited
 (Levenberg-Marquardt). In small strain it also checks a
 converged state for a floating body turned so far that its linearized rotation, strain-free
 but not length-preserving, stretches it between its contacts (:func:`rotation_stretch`).
@@ -14,6 +16,8 @@ Measurements and reasons: ``docs/methods/contact.md``, "Bodies held by contact a
 """
 
 from __future__ import annotations
+
+from typing import Callable
 
 import numpy as np
 import scipy.sparse as sp
@@ -50,6 +54,38 @@ def rigid_fit(coordinates: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.nd
     scale = max(float(np.sqrt((r ** 2).sum(axis=1).mean())), np.finfo(float).tiny)
     a = np.linalg.lstsq(P, np.asarray(u, float).ravel(), rcond=None)[0]
     return a[:3], a[3:] / scale, c
+
+
+def rotation_rows(coordinates: np.ndarray) -> np.ndarray:
+    """The rows (3, 3 n) that map a body's nodal displacement (3 n,) at its nodes
+    ``coordinates`` (n, 3) to the rotation vector (rad) of its least-squares rigid motion,
+    ``omega`` of :func:`rigid_fit`."""
+    P = rigid_body_modes(coordinates)
+    r = np.asarray(coordinates, float) - np.asarray(coordinates, float).mean(axis=0)
+    scale = max(float(np.sqrt((r ** 2).sum(axis=1).mean())), np.finfo(float).tiny)
+    return np.linalg.solve(P.T @ P, P.T)[3:] / scale
+
+
+def bound_rotation(du: np.ndarray, rows: np.ndarray, span: slice, largest: float,
+                   solve: Callable[[np.ndarray], np.ndarray]) -> np.ndarray | None:
+    """Newton's step ``du`` (n,) with the rotation ``omega = rows @ du[span]`` of one body cut
+    to ``largest`` (rad): ``du - W (G^T W)^-1 (omega - omega_cut)``, ``G`` (n, 3) the ``rows``
+    placed on ``span``, ``W = K^-1 G`` by ``solve`` (the step's matrix ``K``), ``omega_cut``
+    ``omega`` scaled to ``largest``. For a symmetric ``K`` it minimizes the quadratic model
+    ``du^T K du / 2 + r^T du`` among steps that turn the body by ``omega_cut``. None if the
+    rotation is within ``largest`` or ``G^T W`` is singular."""
+    omega = rows @ du[span]
+    norm = float(np.linalg.norm(omega))
+    if not norm > largest:
+        return None
+    G = np.zeros((du.size, 3))
+    G[span] = rows.T
+    W = np.column_stack([solve(G[:, k]) for k in range(3)])
+    try:
+        lam = np.linalg.solve(G.T @ W, omega * (1.0 - largest / norm))
+    except np.linalg.LinAlgError:
+        return None
+    return du - W @ lam if np.all(np.isfinite(lam)) else None
 
 
 def spurious_stretch(omega: np.ndarray, chord: np.ndarray) -> float:
@@ -129,6 +165,10 @@ class FloatingBodies:
         self._scale = 0.0
         self._fading = 1.0
         self._largest: tuple[float, float] | None = None
+        #: per floating body, :func:`rotation_rows` of its nodes (built on first use)
+        self._rows: dict[int, np.ndarray] = {}
+        #: Newton steps whose rotation of a floating body was cut (:meth:`limit`)
+        self.rotations_cut = 0
 
     def detect(self, tangents: list[sp.spmatrix]) -> list[int]:
         """Find the floating bodies from each body's own first tangent (once)."""
@@ -163,8 +203,11 @@ class FloatingBodies:
             self._shift = sp.diags(d, format="csr")
         return K + self._scale * self._shift
 
-    def limit(self, du: np.ndarray) -> np.ndarray:
-        """The Newton step ``du`` scaled down (all of it: the bodies' equations are coupled)
+    def limit(self, du: np.ndarray, solve: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray:
+        """The Newton step ``du``, first (given ``solve``, a solve with the step's matrix, and
+        with the residual below ``rotation_cut_below`` of the increment's largest) with each
+        floating body's rotation cut to ``floating_rotation`` by :func:`bound_rotation`, then
+        scaled down (all of it: the bodies' equations are coupled)
         so that no node of a floating body moves by more than ``floating_step`` of its
         element size, nor more than ``floating_turn`` times its radius (:attr:`radius`: a
         turn of that many radians); ``du`` itself if none does. A step shortened to a
@@ -172,6 +215,15 @@ class FloatingBodies:
         shift of the next tangents by ``1 / f``; any other step by ``damping_decay``, within
         ``[1, damping_max]``. Records :attr:`stabilizing`."""
         p = self.policy
+        if solve is not None and np.isfinite(p.floating_rotation) and self._fading < p.rotation_cut_below:
+            for i in self.bodies or ():
+                if i not in self._rows:
+                    self._rows[i] = rotation_rows(self.coordinates[i])
+                cut = bound_rotation(du, self._rows[i], slice(self.offsets[i], self.offsets[i + 1]),
+                                     p.floating_rotation, solve)
+                if cut is not None:
+                    du = cut
+                    self.rotations_cut += 1
         factor = 1.0
         shift = None if not self.bodies or self._shift is None else self._shift.diagonal()
         for i in self.bodies or ():

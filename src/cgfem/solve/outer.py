@@ -272,8 +272,11 @@ def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray 
             first = [True]
 
             def limit(du: np.ndarray) -> np.ndarray:
-                # Newton's first step starts from ``start``
-                du = system.limit(start, du, first[0])
+                # Newton's first step starts from ``start``; with triquadratic elements, on the
+                # direct path, the floating bodies' rotations are cut with the step's
+                # factorization (policy.floating_rotation)
+                cut = solves.again if solves.factorizes and system.order > 1 else None
+                du = system.limit(start, du, first[0], cut)
                 first[0] = False
                 return du
             try:

@@ -42,6 +42,8 @@ from cgfem.solve.linear import LinearSolverError
 from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
 
 DIRECT, KRYLOV = "direct", "krylov"
+#: the relative residual of a reduced saddle point's solve in :meth:`LinearSolves.again`
+AGAIN_RTOL = 1e-6
 
 
 def solve_path(backend: str, n: int, policy: SolverPolicy = DEFAULT_POLICY, saddle: bool = False,
@@ -135,6 +137,19 @@ class LinearSolves:
         x = self._factor.solve(b, rtol)
         self.history.append((DIRECT, int(self._factor.info["iterations"][-1]), self._factor.backend))
         return x
+
+    def again(self, b: np.ndarray) -> np.ndarray:
+        """``b`` (n,) solved with the last matrix's factorization on the direct path, without a
+        new set-up or the residual check (a reduced saddle point to :data:`AGAIN_RTOL`): the
+        floating bodies' cut rotations (:meth:`~cgfem.solve.floating.FloatingBodies.limit`),
+        whose right-hand sides are rigid rotations of a body the matrix barely holds."""
+        factor = self._factor
+        if factor is None or not self.factorizes:
+            raise LinearSolverError("no factorization to solve with again")
+        if isinstance(factor, ReducedSaddleSolver):
+            return factor.iterate(b, AGAIN_RTOL, self.policy.krylov_max_iterations)[0]
+        unchecked = getattr(factor, "solve_unchecked", None)
+        return unchecked(b) if unchecked is not None else factor.solve(b)
 
     def _krylov(self, K: sp.csr_matrix | None, b: np.ndarray, rtol: float | None) -> np.ndarray:
         """The Krylov path (module docstring)."""

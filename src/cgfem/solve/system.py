@@ -11,6 +11,8 @@ contact-onset limit (:class:`~cgfem.solve.onset.OnsetLimit`).
 
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -176,10 +178,12 @@ class System:
             item.add(u, t, r, False)
         return r, self.contact.continuous(u, r)
 
-    def limit(self, start: np.ndarray, du: np.ndarray, first: bool) -> np.ndarray:
-        """Newton's step ``du`` from ``start`` after the floating bodies' step limit and, on a
+    def limit(self, start: np.ndarray, du: np.ndarray, first: bool,
+              solve: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray:
+        """Newton's step ``du`` from ``start`` after the floating bodies' step limit (their
+        rotations cut with ``solve``, a solve with the step's matrix, if given) and, on a
         solve's ``first`` step, the contact-onset limit."""
-        du = self.floating.limit(du)
+        du = self.floating.limit(du, solve)
         return self.onset.limit(start, du) if first else du
 
     def turned_floating(self, u: np.ndarray) -> str:
