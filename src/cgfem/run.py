@@ -14,7 +14,7 @@ import signal
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, NamedTuple
+from typing import Callable
 
 import numba
 import numpy as np
@@ -35,7 +35,7 @@ from cgfem.fem.materials import von_mises
 from cgfem.fem import spr
 from cgfem.fem.spr import energy_norm, zz_estimate
 from cgfem.geometry.builders import build_solid
-from cgfem.geometry.measure import areas_by_name, projected_area, volume
+from cgfem.geometry.measure import BoundaryMeasures, boundary_measures
 from cgfem.results import clear_previous, write_json_atomic, write_step
 from cgfem.solve.linear import available_backends, mkl_threads
 from cgfem.solve.static import StepRecord, solve_static
@@ -49,7 +49,7 @@ from cgfem.solve.system import System
 BYTES_PER_ELEMENT = 90_000
 BYTES_PER_CUT_ELEMENT = 180_000
 #: cut elements per ``P / h^2`` (``P`` the boundary's projected area,
-#: :func:`~cgfem.geometry.measure.projected_area`): measured 1.00 on planar's boxes and
+#: :class:`~cgfem.geometry.measure.BoundaryMeasures`): measured 1.00 on planar's boxes and
 #: 1.00-1.02 on the chain links at levels 0-3; the estimate takes sqrt(2), which on a link
 #: (``P = sqrt(2) A``) is the ``2 A / h^2`` the byte constants were calibrated with
 CUT_ELEMENTS_PER_PROJECTED_AREA = 2.0 ** 0.5
@@ -120,21 +120,7 @@ def machine_memory() -> int:
     return 16 * 2**30
 
 
-class BrepMeasures(NamedTuple):
-    """A solid's B-rep volume, boundary area and projected area
-    (:func:`~cgfem.geometry.measure.projected_area`), in m^3 and m^2."""
-
-    volume: float
-    area: float
-    projected: float
-
-
-def brep_measures(solid) -> BrepMeasures:
-    """The :class:`BrepMeasures` of ``solid``."""
-    return BrepMeasures(volume(solid), float(sum(areas_by_name(solid).values())), projected_area(solid))
-
-
-def estimate_memory(case: Case, level: int, measures: dict[str, BrepMeasures], order: int = 1,
+def estimate_memory(case: Case, level: int, measures: dict[str, BoundaryMeasures], order: int = 1,
                     surface: str = "nurbs_fe", policy: SolverPolicy = DEFAULT_POLICY) -> tuple[int, int, bool]:
     """Estimated bytes and DOFs of ``case`` at ``level`` with elements of ``order`` from the
     B-rep measures of every body (``measures``): inside elements ~ V / h^3, cut elements
@@ -172,12 +158,12 @@ def run_memory(case: Case, level: int, surface: str, order: int = 1,
                policy: SolverPolicy = DEFAULT_POLICY) -> int:
     """Bytes a run of ``case`` will hold at most, by :func:`estimate_memory` plus
     :data:`BASE_MEMORY`: what a scheduler reserves for it (the pipeline's ``mem_mb``). Builds
-    the bodies' B-rep (about 5 ms per body), no grid."""
-    measures = {b.name: brep_measures(build_solid(b.geometry)) for b in case.bodies}
+    the bodies' B-rep (about 3 ms per body), no grid."""
+    measures = {b.name: boundary_measures(build_solid(b.geometry)) for b in case.bodies}
     return estimate_memory(case, level, measures, order, surface, policy)[0] + BASE_MEMORY
 
 
-def check_memory(case: Case, level: int, measures: dict[str, BrepMeasures],
+def check_memory(case: Case, level: int, measures: dict[str, BoundaryMeasures],
                  total: int | None = None, order: int = 1, surface: str = "nurbs_fe",
                  policy: SolverPolicy = DEFAULT_POLICY) -> None:
     """Refuse a level whose estimated memory (:func:`estimate_memory`, an upper bound;
@@ -244,7 +230,7 @@ def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None
             raise InputError(f"contact[{i}].rule", "'segmented' needs a NURBS surface definition "
                                                    f"(--surface {' or '.join(NURBS_DEFINITIONS)}), not {surface}")
     solids = {b.name: build_solid(b.geometry) for b in case.bodies}
-    brep = {name: brep_measures(solid) for name, solid in solids.items()}
+    brep = {name: boundary_measures(solid) for name, solid in solids.items()}
     if memory_check:
         check_memory(case, level, brep, order=order, surface=surface, policy=policy)
     finite = case.kinematics == "finite"

@@ -259,17 +259,15 @@ def test_cut_rotation_minimizes_the_quadratic_model_at_the_cut_turn():
     """A step that turns a floating body by more than ``floating_rotation`` is replaced by the
     minimizer of Newton's quadratic model ``du^T K du / 2 + r^T du`` among the steps with the
     rotation scaled to ``floating_rotation``: its rotation is that, and ``K du + r`` lies in
-    the span of the rotation rows (the constraint's multipliers). A step within it is kept.
-    Far from a solution (residual above ``rotation_cut_below`` of the increment's largest)
-    the step is kept. The body's own stiffness with a weak spring on every dof stands in for
-    the shifted tangent of a body held by contact alone (its rigid motions nearly free)."""
-    from cgfem.solve.floating import rotation_rows
+    the span of the rotation rows (the constraint's multipliers). A step within it is kept;
+    so is every step far from a solution (residual above ``rotation_cut_below`` of the
+    increment's largest) and of elements below ``rotation_cut_min_order``. The body's own
+    stiffness with a weak spring on every dof stands in for the shifted tangent of a body
+    held by contact alone (its rigid motions nearly free)."""
+    from cgfem.solve.floating import rigid_fit_rows
     policy = SolverPolicy(floating_turn=math.inf, floating_step=math.inf)
     body = free_box()
     x = body.space.coordinates
-    floating = FloatingBodies(np.array([0, body.n_dofs]), [body.space.h], [x], policy)
-    floating.bodies = [0]
-    floating._fading = 0.5 * policy.rotation_cut_below          # near a solution
     stiffness = body.assemble(np.zeros(body.n_dofs), 1.0, None)[1]
     K = (stiffness + 1e-6 * abs(stiffness.diagonal()).mean() * sp.identity(body.n_dofs)).tocsc()
     factor = spla.splu(K)
@@ -277,20 +275,28 @@ def test_cut_rotation_minimizes_the_quadratic_model_at_the_cut_turn():
     spin = np.cross([0.3, 0.2, 1.0], x - x.mean(axis=0)).ravel()
     r = -(K @ spin) - 1e-3 * np.abs(K @ spin).max() * rng.standard_normal(body.n_dofs)
     du0 = factor.solve(-r)
-    rows = rotation_rows(x)
+    rows = rigid_fit_rows(x)[3:]
     assert np.linalg.norm(rows @ spin) == pytest.approx(np.linalg.norm([0.3, 0.2, 1.0]), rel=1e-12)
     assert np.linalg.norm(rows @ du0) > policy.floating_rotation
-    cut = floating.limit(du0, factor.solve)
+
+    def floating_at(residual: float, order: int) -> FloatingBodies:
+        """A floating body whose increment's largest residual is 1, at ``residual``."""
+        floating = FloatingBodies(np.array([0, body.n_dofs]), [body.space.h], [x], policy, order)
+        floating.bodies = [0]
+        floating.shifted(K, 1.0, 1.0)
+        floating.shifted(K, 1.0, residual)
+        return floating
+    near = 0.5 * policy.rotation_cut_below
+    cut = floating_at(near, 2).limit(du0, factor.solve)
     omega0, omega = rows @ du0, rows @ cut
-    assert floating.rotations_cut == 1
     np.testing.assert_allclose(omega, omega0 * policy.floating_rotation / np.linalg.norm(omega0), rtol=1e-8)
     gradient = K @ cut + r
     multipliers = np.linalg.lstsq(rows.T, gradient, rcond=None)[0]
     assert np.linalg.norm(gradient - rows.T @ multipliers) <= 1e-8 * np.linalg.norm(r)
     small = 0.5 * policy.floating_rotation / np.linalg.norm(omega0) * du0
-    assert floating.limit(small, factor.solve) is small
-    floating._fading = 2.0 * policy.rotation_cut_below          # still finding its contacts
-    assert floating.limit(du0, factor.solve) is du0 and floating.rotations_cut == 1
+    assert floating_at(near, 2).limit(small, factor.solve) is small
+    assert floating_at(2.0 * policy.rotation_cut_below, 2).limit(du0, factor.solve) is du0
+    assert floating_at(near, 1).limit(du0, factor.solve) is du0
 
 
 def test_rotation_stretch_of_a_turned_and_strained_body():

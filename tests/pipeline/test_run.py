@@ -17,15 +17,15 @@ import pytest
 
 from cgfem.cli import main
 from cgfem.fem.element import HEX8, HEX27
-from cgfem.run import BrepMeasures
+from cgfem.geometry.measure import BoundaryMeasures
 from cgfem.solve.policy import DEFAULT_POLICY
 
 from tests.support.paths import CASES
 
 #: B-rep measures of a half-torus link (R 20 mm, r 5 mm; its projected area is sqrt(2) A)
 #: and of one of planar's boxes (faces normal to the grid axes)
-LINK_MEASURES = BrepMeasures(4.93e-6, 2.13e-3, 2.0 ** 0.5 * 2.13e-3)
-BOX_MEASURES = BrepMeasures(2.5e-7, 3e-4, 3e-4)
+LINK_MEASURES = BoundaryMeasures(4.93e-6, 2.13e-3, 2.0 ** 0.5 * 2.13e-3)
+BOX_MEASURES = BoundaryMeasures(2.5e-7, 3e-4, 3e-4)
 
 #: every test here solves a whole problem
 pytestmark = pytest.mark.slow

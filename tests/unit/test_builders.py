@@ -10,7 +10,7 @@ import pytest
 
 from cgfem.geometry.builders import (box, build_solid, cylinder, half_cylinder, half_torus, sphere,
                                     torus)
-from cgfem.geometry.measure import areas_by_name, projected_area, volume
+from cgfem.geometry.measure import areas_by_name, boundary_measures, volume
 from cgfem.geometry.specs import (PATCH_NAMES, BoxSpec, CylinderSpec, HalfCylinderSpec, HalfTorusSpec,
                                   SphereSpec, TorusSpec)
 from cgfem.geometry.watertight import check_watertight
@@ -275,14 +275,18 @@ def test_box_measures(spec):
 def test_sphere_projected_area(spec):
     """``oint |n_x| + |n_y| + |n_z| dA`` of a sphere: twice its shadow on each coordinate
     plane, ``6 pi r^2`` (its patch edges lie where the normal components change sign)."""
-    assert close(projected_area(sphere(spec)), 6.0 * math.pi * spec.radius**2)
+    measures = boundary_measures(sphere(spec))
+    assert close(measures.projected, 6.0 * math.pi * spec.radius**2)
+    assert close(measures.area, 4.0 * math.pi * spec.radius**2)
 
 
 @pytest.mark.parametrize("spec", box_specs(), ids=ids(box_specs()))
 def test_box_projected_area_is_its_area(spec):
     """Every face of an axis-aligned box has one unit normal component."""
     solid = box(spec)
-    assert close(projected_area(solid), sum(areas_by_name(solid).values()))
+    measures = boundary_measures(solid)
+    assert close(measures.projected, measures.area)
+    assert measures.area == sum(areas_by_name(solid).values()) and measures.volume == volume(solid)
 
 
 # -- names, dispatch, watertightness ----------------------------------------------------

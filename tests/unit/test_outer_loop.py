@@ -216,7 +216,7 @@ def _increment(monkeypatch, script):
         u0, True, [1.0, 1e-12], 1.0, "converged"))
 
     class Solves:
-        frozen, factorizes = False, True
+        frozen, factorizes, again = False, True, None
     contact = _Contact(script)
     out = outer.solve_increment(_System(contact), Solves(), np.zeros(3), [None], 1.0,
                                 SolverOptions(outer_passes=len(script)), lambda m: None)
@@ -280,7 +280,7 @@ def test_a_pass_is_tight_only_within_newton_tol_of_the_forces_at_its_solution(mo
     monkeypatch.setattr(outer, "newton", newton)
 
     class Solves:
-        frozen, factorizes = False, True
+        frozen, factorizes, again = False, True, None
     out = outer.solve_increment(_Forces(_Contact([""] * 10), forces), Solves(), np.zeros(3), [None], 1.0,
                                 SolverOptions(newton_tol=1e-9, outer_passes=10), lambda m: None)
     assert isinstance(out, outer.Increment) and out.outer_converged
@@ -322,7 +322,7 @@ def test_passes_but_the_last_stop_newton_early_only_on_the_krylov_path(monkeypat
         return NewtonResult(u0, True, [1.0, 1e-12], 1.0, "converged")
     monkeypatch.setattr(outer, "newton", newton)
 
-    solves = SimpleNamespace(frozen=False, factorizes=factorizes)
+    solves = SimpleNamespace(frozen=False, factorizes=factorizes, again=None)
     out = outer.solve_increment(_Settling(_Contact([""] * 10)), solves, np.zeros(3), [None], 1.0,
                                 SolverOptions(outer_tol=1e-6, outer_passes=10), lambda m: None)
     assert isinstance(out, outer.Increment) and out.outer_converged
@@ -355,7 +355,7 @@ def test_the_last_passes_are_measured_against_the_forces_from_their_start_on_the
     # relative changes of 1, 1e-2, 1e-5, 1e-8, then none
     scales = iter([1.0, 1.01, 1.01001, 1.0100100001, 1.0100100001])
     system.recover = lambda u: [np.full((2, 3, 3), next(scales))]
-    solves = SimpleNamespace(frozen=False, factorizes=factorizes)
+    solves = SimpleNamespace(frozen=False, factorizes=factorizes, again=None)
     out = outer.solve_increment(system, solves, np.zeros(3), [None], 1.0,
                                 SolverOptions(newton_tol=1e-9, outer_tol=1e-6, outer_passes=10), lambda m: None)
     assert isinstance(out, outer.Increment) and out.outer_converged

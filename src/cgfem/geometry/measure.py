@@ -1,4 +1,4 @@
-"""Area and volume of a solid from its B-rep alone.
+"""Area, projected area and volume of a solid from its B-rep alone.
 
 Gauss-Legendre quadrature on every non-empty knot span of every patch; the volume follows
 from the divergence theorem, ``V = 1/3 \\oint x . n dA``, so it needs only the surface.
@@ -9,6 +9,7 @@ rational quadratic builders integrate to about 1e-14 relative (see the tests).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -63,24 +64,34 @@ def areas_by_name(solid: Solid, order: int = DEFAULT_ORDER) -> dict[str, float]:
     return areas
 
 
-def projected_area(solid: Solid, order: int = DEFAULT_ORDER) -> float:
-    """``\\oint (|n_x| + |n_y| + |n_z|) dA``: the boundary's area projected on the three
-    coordinate planes, the grid cells a surface crosses per ``h^2`` (``A`` for a face normal
-    to an axis, ``sqrt(3) A`` at most). The integrand has kinks where a normal component
-    changes sign, so the Gauss rule is accurate, not exact."""
-    total = 0.0
+class BoundaryMeasures(NamedTuple):
+    """A solid's enclosed ``volume`` (m^3), boundary ``area`` and ``projected`` area (m^2):
+    ``oint (|n_x| + |n_y| + |n_z|) dA``, the boundary projected on the three coordinate
+    planes, about the number of grid cells it crosses times ``h^2`` (``A`` for a face normal
+    to an axis, ``sqrt(3) A`` at most; its integrand has kinks where a normal component
+    changes sign, so the Gauss rule is accurate, not exact)."""
+
+    volume: float
+    area: float
+    projected: float
+
+
+def boundary_measures(solid: Solid, order: int = DEFAULT_ORDER) -> BoundaryMeasures:
+    """The :class:`BoundaryMeasures` of ``solid`` from one rule per patch; the volume is
+    ``1/3 \\oint (x - c) . n dA`` with ``c`` the control-point centroid (the shift keeps
+    round-off small for solids far from the origin), the area summed by name like
+    :func:`areas_by_name`."""
+    centre = np.mean(np.concatenate([p.surface.points.reshape(-1, 3) for p in solid.patches]), axis=0)
+    areas = dict.fromkeys(solid.patch_names, 0.0)
+    enclosed = projected = 0.0
     for patch in solid.patches:
         rule = patch_rule(patch.surface, order)
-        total += float(np.sum(np.abs(rule.n).sum(axis=1) * rule.w))
-    return total
+        areas[patch.name] += float(rule.w.sum())
+        enclosed += float(np.sum(np.einsum("ij,ij->i", rule.x - centre, rule.n) * rule.w))
+        projected += float(np.sum(np.abs(rule.n).sum(axis=1) * rule.w))
+    return BoundaryMeasures(enclosed / 3.0, float(sum(areas.values())), projected)
 
 
 def volume(solid: Solid, order: int = DEFAULT_ORDER) -> float:
-    """Enclosed volume, ``1/3 \\oint (x - c) . n dA`` with ``c`` the control-point centroid
-    (the shift keeps round-off small for solids far from the origin)."""
-    centre = np.mean(np.concatenate([p.surface.points.reshape(-1, 3) for p in solid.patches]), axis=0)
-    total = 0.0
-    for patch in solid.patches:
-        rule = patch_rule(patch.surface, order)
-        total += float(np.sum(np.einsum("ij,ij->i", rule.x - centre, rule.n) * rule.w))
-    return total / 3.0
+    """Enclosed volume (:func:`boundary_measures`)."""
+    return boundary_measures(solid, order).volume

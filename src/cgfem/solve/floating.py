@@ -43,27 +43,25 @@ def free_rigid_modes(coordinates: np.ndarray, K: sp.spmatrix, free_mode: float) 
     return int(np.sum(np.linalg.eigvalsh(0.5 * (S + S.T)) < free_mode * scale))
 
 
-def rigid_fit(coordinates: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The rigid motion nearest (least squares over the nodes) to a body's nodal displacement
-    ``u`` (n, 3) at its nodes ``coordinates`` (n, 3), linearized: ``u ~ t + omega x (X - c)``.
-    Returns the translation ``t`` (3,) (m), the rotation vector ``omega`` (3,) (rad) and the
-    centroid ``c`` (3,) (m) of the nodes."""
-    P = rigid_body_modes(coordinates)
-    c = np.asarray(coordinates, float).mean(axis=0)
-    r = np.asarray(coordinates, float) - c
-    scale = max(float(np.sqrt((r ** 2).sum(axis=1).mean())), np.finfo(float).tiny)
-    a = np.linalg.lstsq(P, np.asarray(u, float).ravel(), rcond=None)[0]
-    return a[:3], a[3:] / scale, c
-
-
-def rotation_rows(coordinates: np.ndarray) -> np.ndarray:
-    """The rows (3, 3 n) that map a body's nodal displacement (3 n,) at its nodes
-    ``coordinates`` (n, 3) to the rotation vector (rad) of its least-squares rigid motion,
-    ``omega`` of :func:`rigid_fit`."""
+def rigid_fit_rows(coordinates: np.ndarray) -> np.ndarray:
+    """The rows (6, 3 n) that map a body's nodal displacement (3 n,) at its nodes
+    ``coordinates`` (n, 3) to its least-squares rigid motion, linearized
+    ``u ~ t + omega x (X - c)`` with ``c`` the nodes' centroid: the translation ``t`` (m)
+    from rows 0-2, the rotation vector ``omega`` (rad) from rows 3-5."""
     P = rigid_body_modes(coordinates)
     r = np.asarray(coordinates, float) - np.asarray(coordinates, float).mean(axis=0)
     scale = max(float(np.sqrt((r ** 2).sum(axis=1).mean())), np.finfo(float).tiny)
-    return np.linalg.solve(P.T @ P, P.T)[3:] / scale
+    rows = np.linalg.solve(P.T @ P, P.T)
+    rows[3:] /= scale
+    return rows
+
+
+def rigid_fit(coordinates: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rigid motion nearest to a body's nodal displacement ``u`` (n, 3) at its nodes
+    ``coordinates`` (n, 3) (:func:`rigid_fit_rows`): the translation ``t`` (3,) (m), the
+    rotation vector ``omega`` (3,) (rad) and the centroid ``c`` (3,) (m) of the nodes."""
+    a = rigid_fit_rows(coordinates) @ np.asarray(u, float).ravel()
+    return a[:3], a[3:], np.asarray(coordinates, float).mean(axis=0)
 
 
 def bound_rotation(du: np.ndarray, rows: np.ndarray, span: slice, largest: float,
@@ -142,12 +140,13 @@ class FloatingBodies:
     """The tangent shift and step limit of the bodies of a system held by contact alone.
 
     ``offsets`` (n_bodies + 1,): body ``i`` owns unknowns ``offsets[i]:offsets[i+1]``;
-    ``h`` (n_bodies,): element sizes (m); ``coordinates``: per body its nodes (n_i, 3) (m).
+    ``h`` (n_bodies,): element sizes (m); ``coordinates``: per body its nodes (n_i, 3) (m);
+    ``order``: the elements' (rotations are cut from ``policy.rotation_cut_min_order`` on).
     Until :meth:`detect` has run, :attr:`bodies` is None.
     """
 
     def __init__(self, offsets: np.ndarray, h: list[float], coordinates: list[np.ndarray],
-                 policy: SolverPolicy = DEFAULT_POLICY):
+                 policy: SolverPolicy = DEFAULT_POLICY, order: int = 1):
         self.offsets = np.asarray(offsets, np.int64)
         self.h, self.coordinates, self.policy = list(h), coordinates, policy
         #: per body, the RMS distance of its nodes to their centroid (m)
@@ -165,10 +164,10 @@ class FloatingBodies:
         self._scale = 0.0
         self._fading = 1.0
         self._largest: tuple[float, float] | None = None
-        #: per floating body, :func:`rotation_rows` of its nodes (built on first use)
+        #: whether :meth:`limit` cuts rotations, and per floating body its rotation rows
+        #: (:func:`rigid_fit_rows`, built on first use)
+        self._cuts = order >= policy.rotation_cut_min_order and bool(np.isfinite(policy.floating_rotation))
         self._rows: dict[int, np.ndarray] = {}
-        #: Newton steps whose rotation of a floating body was cut (:meth:`limit`)
-        self.rotations_cut = 0
 
     def detect(self, tangents: list[sp.spmatrix]) -> list[int]:
         """Find the floating bodies from each body's own first tangent (once)."""
@@ -204,9 +203,10 @@ class FloatingBodies:
         return K + self._scale * self._shift
 
     def limit(self, du: np.ndarray, solve: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray:
-        """The Newton step ``du``, first (given ``solve``, a solve with the step's matrix, and
-        with the residual below ``rotation_cut_below`` of the increment's largest) with each
-        floating body's rotation cut to ``floating_rotation`` by :func:`bound_rotation`, then
+        """The Newton step ``du``, first (elements of order ``rotation_cut_min_order`` or above,
+        given ``solve``, a solve with the step's matrix, and with the residual below
+        ``rotation_cut_below`` of the increment's largest) with each floating body's rotation
+        cut to ``floating_rotation`` by :func:`bound_rotation`, then
         scaled down (all of it: the bodies' equations are coupled)
         so that no node of a floating body moves by more than ``floating_step`` of its
         element size, nor more than ``floating_turn`` times its radius (:attr:`radius`: a
@@ -215,15 +215,13 @@ class FloatingBodies:
         shift of the next tangents by ``1 / f``; any other step by ``damping_decay``, within
         ``[1, damping_max]``. Records :attr:`stabilizing`."""
         p = self.policy
-        if solve is not None and np.isfinite(p.floating_rotation) and self._fading < p.rotation_cut_below:
+        if self._cuts and solve is not None and self._fading < p.rotation_cut_below:
             for i in self.bodies or ():
                 if i not in self._rows:
-                    self._rows[i] = rotation_rows(self.coordinates[i])
+                    self._rows[i] = rigid_fit_rows(self.coordinates[i])[3:]
                 cut = bound_rotation(du, self._rows[i], slice(self.offsets[i], self.offsets[i + 1]),
                                      p.floating_rotation, solve)
-                if cut is not None:
-                    du = cut
-                    self.rotations_cut += 1
+                du = du if cut is None else cut
         factor = 1.0
         shift = None if not self.bodies or self._shift is None else self._shift.diagonal()
         for i in self.bodies or ():

@@ -254,6 +254,7 @@ def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray 
         u = start
     # a pass that is not the last needs Newton only to a fraction of its first residual
     loose_fraction = pass_tolerance(policy, solves, loose)
+    again = solves.again if solves.factorizes else None
     forces_from = options.outer_tol * (1.0 if solves.factorizes else LAST_PASSES)
     for outer in range(1, options.outer_passes + 1):
         stop_at = loose_fraction if (outer == 1 or changes[-1] > LAST_PASSES * options.outer_tol) else 0.0
@@ -272,11 +273,9 @@ def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray 
             first = [True]
 
             def limit(du: np.ndarray) -> np.ndarray:
-                # Newton's first step starts from ``start``; with triquadratic elements, on the
-                # direct path, the floating bodies' rotations are cut with the step's
-                # factorization (policy.floating_rotation)
-                cut = solves.again if solves.factorizes and system.order > 1 else None
-                du = system.limit(start, du, first[0], cut)
+                # Newton's first step starts from ``start``; on the direct path the floating
+                # bodies' rotations may be cut with the step's factorization (``again``)
+                du = system.limit(start, du, first[0], again)
                 first[0] = False
                 return du
             try:

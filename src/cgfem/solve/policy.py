@@ -61,17 +61,17 @@ class SolverPolicy:
         (the RMS distance of its nodes to their centroid): about the largest turn (rad) of a
         step. A coarse grid's ``h`` lets a step turn a small body far (1 h turns chain3's middle
         link by 0.21 rad at level 0), and a linearized turn stretches it (``rotation_stretch``).
-    floating_rotation, rotation_cut_below : largest rotation (rad) of a floating body's
-        least-squares rigid motion in one Newton step on the direct path, where the residual
-        is below ``rotation_cut_below`` of the increment's largest (near a solution, where a
-        larger turn is the soft spin of a body held at two places, not the body finding its
-        contacts); a step that turns it further is replaced by the step that minimizes
+    floating_rotation, rotation_cut_below, rotation_cut_min_order : largest rotation (rad) of a
+        floating body's least-squares rigid motion in one Newton step on the direct path, where
+        the residual is below ``rotation_cut_below`` of the increment's largest (near a
+        solution, where a larger turn is the soft spin of a body held at two places, not the
+        body finding its contacts); a step that turns it further is replaced by the step that minimizes
         Newton's quadratic model with the rotation cut to this size (three more solves with
         the step's factorization): the other unknowns follow the cut turn, where scaling the
-        whole step held them back. Triquadratic elements only: the trilinear examples converge
-        without it, and on chain3 at level 1 it moved ``nurbs_fe`` to another of the middle
-        link's equilibria (0.57 % in the pulled reaction). ``floating_rotation = inf`` turns
-        it off.
+        whole step held them back. Only for elements of order ``rotation_cut_min_order``
+        and above (triquadratic): the trilinear examples converge without it, and on chain3 at level 1
+        it moved ``nurbs_fe`` to another of the middle link's equilibria (0.57 % in the pulled
+        reaction). ``floating_rotation = inf`` turns it off.
     damping_decay, damping_above, damping_max : the Levenberg-Marquardt damping of the shift: a
         step limited to a fraction ``f`` at ``|r|`` above ``damping_above`` of the increment's
         largest multiplies the shift of the next tangents by ``1 / f``; any other step by
@@ -137,6 +137,7 @@ class SolverPolicy:
     floating_turn: float = 0.07
     floating_rotation: float = 0.05
     rotation_cut_below: float = 1e-3
+    rotation_cut_min_order: int = 2
     damping_decay: float = 0.25
     damping_above: float = 1e-2
     damping_max: float = 1e6

@@ -98,7 +98,7 @@ class System:
         self.contact = ContactSet(list(pairs or []), self.offsets)
         #: the bodies held by contact alone, their tangent shift and step limit
         self.floating = FloatingBodies(self.offsets, [b.space.h for b in bodies],
-                                       [b.space.coordinates for b in bodies], policy)
+                                       [b.space.coordinates for b in bodies], policy, self.order)
         if not self.contact:
             self.floating.bodies = []
         #: the contact-onset limit of a solve's first Newton step
