@@ -58,17 +58,24 @@ def test_reduced_solve_equals_direct(symmetric, preconditioner):
 
 @pytest.mark.parametrize("symmetric", [True, False])
 def test_auto_reduces_saddle_points_above_the_direct_limit(monkeypatch, symmetric):
-    """Above SADDLE_DIRECT_DOFS ``auto`` solves on the bodies' dofs, preconditioned by the
-    backend the bodies' matrix alone would get, to the direct solution."""
+    """Above SADDLE_DIRECT_DOFS (SADDLE_DIRECT_ORDER2_DOFS for triquadratic elements)
+    ``auto`` solves on the bodies' dofs, preconditioned by the backend the bodies' matrix
+    alone would get, to the direct solution."""
     from cgfem.solve import backends
     A, b, n_u, c = _system(symmetric)
     monkeypatch.setattr(backends, "SADDLE_DIRECT_DOFS", 100)
     solver = backends.factorize(A, symmetric=symmetric, indefinite=True, saddle=(n_u, [c]))
     assert solver.backend == f"saddle-{backends.choose_backend(n_u, symmetric)}"
     assert np.linalg.norm(A @ solver.solve(b) - b) <= 1e-8 * np.linalg.norm(b)
+    # triquadratic elements have a limit of their own
+    monkeypatch.setattr(backends, "SADDLE_DIRECT_ORDER2_DOFS", A.shape[0])
+    whole = backends.choose_backend(A.shape[0], symmetric, indefinite=True)
+    assert backends.factorize(A, symmetric=symmetric, indefinite=True, saddle=(n_u, [c]), order=2).backend == whole
     monkeypatch.setattr(backends, "SADDLE_DIRECT_DOFS", A.shape[0])
-    assert backends.factorize(A, symmetric=symmetric, indefinite=True, saddle=(n_u, [c])).backend == \
-        backends.choose_backend(A.shape[0], symmetric, indefinite=True)
+    assert backends.factorize(A, symmetric=symmetric, indefinite=True, saddle=(n_u, [c])).backend == whole
+    monkeypatch.setattr(backends, "SADDLE_DIRECT_ORDER2_DOFS", A.shape[0] - 1)
+    assert backends.factorize(A, symmetric=symmetric, indefinite=True, saddle=(n_u, [c]), order=2).backend \
+        .startswith("saddle-")
 
 
 def _fit_like_system(drop_rows: int = 4, seed: int = 1):

@@ -19,9 +19,9 @@ solve, ahead from its second solve, insensitive to conditioning; at 173k it need
 factorization to break even, at 286k 9) and to pyamg above; without pypardiso, to superlu
 up to :data:`SUPERLU_MAX_DOFS` (under 1 s), then pyamg. Non-symmetric systems go to pardiso,
 else superlu (pyamg only on request); so do saddle-point systems (``indefinite``: the fit
-constraints of ``nurbs_fit``) up to :data:`SADDLE_DIRECT_DOFS`, which pyamg cannot solve
-at all; larger ones, their constraints given, are solved on the bodies' dofs
-(:mod:`cgfem.solve.saddle`). Peak memory at 286k: pardiso 4.1 GB, pyamg 0.9 GB.
+constraints of ``nurbs_fit``) up to :data:`SADDLE_DIRECT_DOFS` (triquadratic elements:
+:data:`SADDLE_DIRECT_ORDER2_DOFS`), which pyamg cannot solve at all; larger ones, their
+constraints given, are solved on the bodies' dofs (:mod:`cgfem.solve.saddle`). Peak memory at 286k: pardiso 4.1 GB, pyamg 0.9 GB.
 """
 
 from __future__ import annotations
@@ -43,8 +43,16 @@ SADDLE_MAX_DOFS = 150_000
 #: above this many unknowns a saddle point with its fit constraints known is solved on the
 #: bodies' dofs (:mod:`cgfem.solve.saddle`) instead of factorized whole: chain3 at level 1
 #: (20.7k unknowns), 2.9 s whole (23M factor entries) against 2.4 s reduced (3.8M, 11 GMRES
-#: iterations)
+#: iterations); the whole run 27.5 s against 19.4 s
 SADDLE_DIRECT_DOFS = 20_000
+#: the same for triquadratic elements, whose own couplings fill the factor more and the fit's
+#: less (its spans are the grid's, its unknowns a smaller share): chain3 at order 2, level 0
+#: (20.1k unknowns, 3.3k of them the fit's), 32M factor entries whole against 9.8M reduced,
+#: the run's solve 79 s whole against 126 s reduced at the same peak (2.3 GB), three
+#: Krylov solves of the reduced system per cut rotation (:meth:`LinearSolves.again`) taking
+#: 28 % of it. Order-2 saddle points on the direct path above this size hold a floating
+#: body (``krylov_floating_min_dofs``)
+SADDLE_DIRECT_ORDER2_DOFS = 40_000
 
 
 def choose_backend(n_dofs: int, symmetric: bool, requested: str = "auto",
@@ -74,14 +82,15 @@ def choose_backend(n_dofs: int, symmetric: bool, requested: str = "auto",
 def factorize(A: sp.spmatrix, *, backend: str = "auto", symmetric: bool = True,
               near_null: np.ndarray | None = None, rtol: float = 1e-10,
               indefinite: bool = False, saddle: tuple | None = None,
-              reuse: LinearSolver | None = None) -> LinearSolver:
+              reuse: LinearSolver | None = None, order: int = 1) -> LinearSolver:
     """Factorize (superlu, pardiso) or build the AMG hierarchy (pyamg) of the square matrix
     ``A``. ``near_null`` (e.g. :func:`rigid_body_modes`) and ``rtol`` (relative residual)
     serve pyamg only; ``indefinite``: a saddle-point matrix (:func:`choose_backend`).
     ``saddle``: ``(n_u, constraints)`` of nurbs_fit's saddle point
-    (:mod:`cgfem.solve.saddle`): with ``auto``, one above :data:`SADDLE_DIRECT_DOFS` is
-    solved on the bodies' dofs by a Krylov method preconditioned by the reduced matrix,
-    which gets the backend the bodies' dofs alone would get (:func:`choose_backend`).
+    (:mod:`cgfem.solve.saddle`): with ``auto``, one above :data:`SADDLE_DIRECT_DOFS`
+    (:data:`SADDLE_DIRECT_ORDER2_DOFS` for elements of ``order`` 2) is solved on the
+    bodies' dofs by a Krylov method preconditioned by the reduced matrix, which gets the
+    backend the bodies' dofs alone would get (:func:`choose_backend`).
     ``reuse``: the solver of the system's previous matrix, no longer needed (its PARDISO
     analysis may serve this one: :func:`cgfem.solve.linear.build`). Raises
     :class:`LinearSolverError` on a singular or non-finite matrix, ``ValueError`` on a bad
@@ -90,7 +99,8 @@ def factorize(A: sp.spmatrix, *, backend: str = "auto", symmetric: bool = True,
         raise ValueError(f"A must be a square sparse matrix, got {type(A).__name__} "
                          f"of shape {getattr(A, 'shape', None)}")
     name = choose_backend(A.shape[0], symmetric, backend, indefinite)
-    if indefinite and saddle is not None and backend == "auto" and A.shape[0] > SADDLE_DIRECT_DOFS:
+    whole = SADDLE_DIRECT_DOFS if order == 1 else SADDLE_DIRECT_ORDER2_DOFS
+    if indefinite and saddle is not None and backend == "auto" and A.shape[0] > whole:
         # the whole factorization's fill is the fit constraints' (chain3 at level 2: 195M
         # factor entries with or without contact, 36M reduced), which no ordering removed
         n_u = int(saddle[0])

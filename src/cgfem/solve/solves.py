@@ -129,7 +129,7 @@ class LinearSolves:
             previous, self._factor = self._factor, None
             self._factor = factorize(K, backend=self.backend, symmetric=self.symmetric,
                                      near_null=self.near_null, indefinite=self.indefinite, saddle=self.saddle,
-                                     reuse=previous)
+                                     reuse=previous, order=self.order)
             self._key = K
             if not self._logged:
                 self._logged = True
