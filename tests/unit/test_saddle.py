@@ -46,11 +46,12 @@ def test_reduced_solve_equals_direct(symmetric, preconditioner):
     exact = np.linalg.solve(A.toarray(), b)
     assert np.linalg.norm(A @ x - b) <= 1e-8 * np.linalg.norm(b)
     assert np.linalg.norm(x - exact) <= 1e-7 * np.linalg.norm(exact)
-    # a random G is no fit (its truncated rows are a poor stand-in): measured 140 CG
-    # iterations (symmetric) and 368 GMRES iterations with AMG, 17-18 with the factorized
-    # reduced matrix
-    assert solver.info["iterations"][-1] < 400
+    # a random G is no fit (its truncated rows are a poor stand-in, and no preconditioner of
+    # the reduced matrix beats none here: 260 CG and 341 GMRES iterations; with AMG 206 and
+    # 650): measured 17-18 iterations with the factorized reduced matrix
+    # (test_amg_of_the_reduced_matrix_preconditions_a_fit for the AMG)
     if preconditioner != "pyamg":
+        assert solver.info["iterations"][-1] <= 30
         amg = reduced_saddle(A, n_u, [c], symmetric)
         amg.solve(b)
         assert solver.info["iterations"][-1] < amg.info["iterations"][-1]
@@ -133,6 +134,22 @@ def test_truncated_fit_rows_make_a_close_preconditioner(symmetric):
     rows = saddle.ReducedSaddleSolver(A, n_u, [c], symmetric, None, preconditioner="superlu")._fit_rows(
         c, np.arange(12, 3 * 24))
     assert rows[:12].nnz == 0 and rows[12:].nnz > 0
+
+
+@pytest.mark.parametrize("symmetric", [True, False])
+def test_amg_of_the_reduced_matrix_preconditions_a_fit(symmetric):
+    """On a fit-like system the AMG of the reduced matrix (the Krylov path's preconditioner)
+    needs well under half the Krylov iterations of no preconditioner (measured 142 CG against
+    346, 173 GMRES against 437)."""
+    A, b, n_u, c = _fit_like_system()
+    solver = reduced_saddle(A, n_u, [c], symmetric)
+    x = solver.solve(b)
+    assert np.linalg.norm(A @ x - b) <= 1e-8 * np.linalg.norm(b)
+    amg = solver.info["iterations"][-1]
+    solver._precondition = lambda r: r
+    _, bare, residual = solver.iterate(b, 1e-10, 2000)
+    assert residual <= 1e-10
+    assert amg < 0.5 * bare
 
 
 def test_rows_of_the_fit_are_computed_once_per_control():

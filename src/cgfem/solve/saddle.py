@@ -25,8 +25,9 @@ around its control: ``P`` stays nearly as sparse as nurbs_fe's matrix while ``P^
 close to the identity (docs/methods/contact.md). ``P`` is
 factorized by a direct backend (``preconditioner="pardiso"``, ``"superlu"``), which needs
 the memory of the bodies' own factorization instead of the whole saddle point's, or
-coarsened by smoothed-aggregation AMG, one V-cycle per iteration (``"pyamg"``, with CG when
-the system is symmetric).
+coarsened by the Krylov path's smoothed-aggregation AMG
+(:class:`~cgfem.solve.krylov.AMGPreconditioner`), one V-cycle per iteration (``"pyamg"``,
+with CG when the system is symmetric).
 """
 
 from __future__ import annotations
@@ -38,8 +39,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from cgfem.solve.linear import LinearSolver, LinearSolverError, build, scale_symmetric
-from cgfem.solve.multigrid import smoothed_aggregation, v_cycle
+from cgfem.solve.krylov import AMGPreconditioner
+from cgfem.solve.linear import LinearSolver, LinearSolverError, build
 
 #: inner iterations of one GMRES cycle
 RESTART = 50
@@ -123,15 +124,14 @@ class ReducedSaddleSolver(LinearSolver):
         Ct = sp.vstack([self._fit_rows(c, touched[(touched >= a) & (touched < b)] - a)
                         for c, a, b in zip(constraints, self._offsets[:-1], self._offsets[1:])]).tocsr()
         P = (self.K + Ct.T @ self.Kc @ Ct).tocsr()
-        if symmetric:
-            P = (0.5 * (P + P.T)).tocsr()
-        d = np.abs(P.diagonal())
-        if np.any(d == 0.0):
+        if np.any(P.diagonal() == 0.0):
             raise LinearSolverError(f"{self.backend}: zero diagonal entries in the reduced matrix")
         self._factor: LinearSolver | None = None
         # what is factorized (or coarsened): the reduced matrix, n_u x n_u
         self.info.update(factorized_n=int(n_u), factorized_nnz=int(P.nnz))
         if preconditioner != "pyamg":
+            if symmetric:
+                P = (0.5 * (P + P.T)).tocsr()
             # the preconditioner of the system's previous matrix, if given, lends its analysis
             factor = build(P, preconditioner, symmetric=symmetric,
                            reuse=reuse._factor if isinstance(reuse, ReducedSaddleSolver) else None)
@@ -139,19 +139,9 @@ class ReducedSaddleSolver(LinearSolver):
             self.info["factor_nnz"] = int(factor.info.get("factor_nnz", 0))
             self._precondition = factor.solve_unchecked
             return
-        s = 1.0 / np.sqrt(d)
-        Ps = scale_symmetric(P, s)
-        B = None if near_null is None else near_null[:n_u] / s[:, None]
-        # as for the bodies' own matrices (cgfem.solve.linear): nodal 3x3 blocks, and the
-        # given near-null space taken as it is (improving it costs relaxation sweeps on all
-        # six modes on every level). pyamg's symmetric sweeps on both sides, not the Krylov
-        # path's one forward and one backward (cgfem.solve.krylov), and every body's six
-        # modes: on planar at level 2 those took 1.6x the CG iterations in the same time
-        if n_u % 3 == 0:
-            Ps = Ps.tobsr(blocksize=(3, 3))
-        kwargs = {"improve_candidates": None} if B is not None else {}
-        ml = smoothed_aggregation(Ps, B=B, symmetry="hermitian" if symmetric else "nonsymmetric", **kwargs)
-        self._precondition = lambda r: s * v_cycle(ml, s * r)
+        # the Krylov path's preconditioner of the bodies' matrices (symmetrized if symmetric,
+        # one coarse mode set per body, aggregates within bodies), of the reduced matrix
+        self._precondition = AMGPreconditioner(P, None if near_null is None else near_null[:n_u], symmetric)
 
     def _fit_rows(self, c: FitConstraint, rows: np.ndarray) -> sp.csr_matrix:
         """:meth:`FitConstraint.truncated_rows` of the patch's controls among its ``Z`` rows
