@@ -78,3 +78,40 @@ def test_couplings_are_added_entry_for_entry_as_scipy_adds_them():
     unsorted.indices[K.indptr[0]:K.indptr[1]] = unsorted.indices[K.indptr[0]:K.indptr[1]][::-1]
     assert not unsorted.has_sorted_indices
     assert np.array_equal(add_couplings(unsorted, C).toarray(), (unsorted + C.tocsr()).toarray())
+
+
+def test_a_floating_bodys_shift_is_scipys_sum_array_for_array():
+    """The shift added on the diagonal entries of the floating bodies' rows gives the arrays
+    of scipy's ``K + diags(shift)``; a row without its diagonal entry takes scipy's sum."""
+    from cgfem.solve.floating import FloatingBodies
+    K = sp.random(30, 30, density=0.3, format="csr", random_state=4) + sp.eye(30, format="csr") * 5.0
+    K.sum_duplicates()
+    floating = FloatingBodies(np.array([0, 12, 30]), [1.0, 1.0], [np.zeros((4, 3)), np.zeros((6, 3))])
+    floating.bodies = [1]
+    before = K.copy()
+    shifted = floating.shifted(K, 1.0, 1.0)
+    d = np.zeros(30)
+    d[12:] = floating.policy.floating_shift * K.diagonal()[12:]
+    expected = K + sp.diags(floating._scale * d, format="csr")
+    for name in ("indptr", "indices", "data"):
+        assert np.array_equal(getattr(shifted, name), getattr(expected, name)), name
+    assert np.array_equal(K.toarray() + np.diag(floating._scale * d), shifted.toarray())
+    # the input is left as it was, and a missing diagonal entry falls back to scipy's sum
+    assert np.array_equal(K.data, before.data)
+    holed = K.tolil()
+    holed[20, 20] = 0.0
+    holed = holed.tocsr()
+    holed.eliminate_zeros()
+    assert np.array_equal(floating.shifted(holed, 1.0, 1.0).toarray(),
+                          (holed + sp.diags(floating._scale * d, format="csr")).toarray())
+
+
+def test_the_leading_block_is_scipys_slice_array_for_array():
+    """The reduced saddle solver's bodies' block: scipy's ``A[:n][:, :n]``, array for array."""
+    from cgfem.solve._sparse_kernels import leading_block
+    A = sp.random(50, 50, density=0.2, format="csr", random_state=5)
+    for n in (0, 17, 50):
+        indptr, indices, data = leading_block(A.indptr, A.indices, A.data, n)
+        expected = A[:n][:, :n].tocsr()
+        assert np.array_equal(indptr, expected.indptr) and np.array_equal(indices, expected.indices)
+        assert np.array_equal(data, expected.data)

@@ -22,6 +22,7 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
+from cgfem.solve._sparse_kernels import diagonal_positions
 from cgfem.solve.linear import rigid_body_modes
 from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
 
@@ -160,7 +161,9 @@ class FloatingBodies:
         self.damping = 1.0
         #: per floating body, the norm of the force the shift put into the last Newton step (N)
         self.stabilizing: dict[int, float] = {}
-        self._shift: sp.csr_matrix | None = None
+        #: the shift's diagonal (n,) before its scale, and the rows where it is not zero
+        self._shift: np.ndarray | None = None
+        self._shifted_rows = np.zeros(0, np.int64)
         self._scale = 0.0
         self._fading = 1.0
         self._largest: tuple[float, float] | None = None
@@ -199,8 +202,16 @@ class FloatingBodies:
             for i in self.bodies:
                 a, b = self.offsets[i], self.offsets[i + 1]
                 d[a:b] = self.policy.floating_shift * diag[a:b]
-            self._shift = sp.diags(d, format="csr")
-        return K + self._scale * self._shift
+            self._shift, self._shifted_rows = d, np.flatnonzero(d)
+        shift = self._scale * self._shift
+        rows = self._shifted_rows
+        at = diagonal_positions(K.indptr, K.indices, rows) if K.has_canonical_format else None
+        if at is None or np.any(at < 0):
+            return K + sp.diags(shift, format="csr")
+        # the sum scipy forms, without its pass over every entry
+        data = K.data.copy()
+        data[at] += shift[rows]
+        return sp.csr_matrix((data, K.indices, K.indptr), shape=K.shape)
 
     def limit(self, du: np.ndarray, solve: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray:
         """The Newton step ``du``, first (elements of order ``rotation_cut_min_order`` or above,
@@ -223,7 +234,7 @@ class FloatingBodies:
                                      p.floating_rotation, solve)
                 du = du if cut is None else cut
         factor = 1.0
-        shift = None if not self.bodies or self._shift is None else self._shift.diagonal()
+        shift = None if not self.bodies else self._shift
         for i in self.bodies or ():
             a, b = self.offsets[i], self.offsets[i + 1]
             if shift is not None:

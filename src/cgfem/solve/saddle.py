@@ -39,6 +39,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from cgfem.solve._sparse_kernels import leading_block
 from cgfem.solve.krylov import AMGPreconditioner
 from cgfem.solve.linear import LinearSolver, LinearSolverError, build
 
@@ -171,7 +172,11 @@ class ReducedSaddleSolver(LinearSolver):
         """The operator of the system of ``A`` (CSR, the whole saddle point): its bodies' block
         ``K``, the contact tangent ``Kc`` on all fitted ``Z``, and its product."""
         n_u, z = self.n_u, self._z
-        self.K = A[:n_u][:, :n_u].tocsr()
+        if A.has_canonical_format:
+            indptr, indices, data = leading_block(A.indptr, A.indices, A.data, n_u)
+            self.K = sp.csr_matrix((data, indices, indptr), shape=(n_u, n_u))
+        else:
+            self.K = A[:n_u][:, :n_u].tocsr()
         self.Kc = A[z][:, z].tocsr()
         self._matvec = A.dot
 
