@@ -115,3 +115,38 @@ def test_the_leading_block_is_scipys_slice_array_for_array():
         expected = A[:n][:, :n].tocsr()
         assert np.array_equal(indptr, expected.indptr) and np.array_equal(indices, expected.indices)
         assert np.array_equal(data, expected.data)
+
+
+def test_own_symmetrization_and_scaling_are_scipys_array_for_array():
+    """The AMG set-up's ``diag(s) A diag(s)`` and ``(A + A^T) / 2`` on a matrix of symmetric
+    pattern (with a pair that cancels exactly, which scipy drops) give scipy's arrays; a
+    pattern that is not symmetric takes scipy's sum."""
+    from cgfem.solve.linear import scale_symmetric, symmetrize_own
+    rng = np.random.default_rng(6)
+    R = sp.random(40, 40, density=0.2, format="csr", random_state=7)
+    A = sp.csr_matrix(R + R.T + sp.eye(40))
+    A.data = rng.standard_normal(A.nnz)
+    s = rng.uniform(0.5, 2.0, 40)
+    expected = sp.csr_matrix(sp.diags(s) @ A @ sp.diags(s))
+    expected.eliminate_zeros()
+    scaled = scale_symmetric(A, s)
+    scaled_before = scaled.toarray()
+    assert np.array_equal(scaled.indptr, expected.indptr) and np.array_equal(scaled.indices, expected.indices)
+    np.testing.assert_array_equal(scaled.data, A.data * np.repeat(s, np.diff(A.indptr)) * s[A.indices])
+    i, j = scaled.nonzero()
+    k = np.flatnonzero(i < j)[0]
+    scaled[j[k], i[k]] = -scaled[i[k], j[k]]                          # a pair that cancels
+    reference = sp.csr_matrix(0.5 * (scaled + scaled.T))
+    own = symmetrize_own(scaled.copy())
+    for name in ("indptr", "indices", "data"):
+        assert np.array_equal(getattr(own, name), getattr(reference, name)), name
+    assert own.nnz < scaled.nnz
+    # a pattern that is not symmetric: merged with the transpose, scipy's arrays too
+    skew = sp.csr_matrix(sp.triu(A, 1) + sp.eye(40))
+    merged, reference = symmetrize_own(skew.copy()), sp.csr_matrix(0.5 * (skew + skew.T))
+    for name in ("indptr", "indices", "data"):
+        assert np.array_equal(getattr(merged, name), getattr(reference, name)), name
+    # scaled in place when the caller owns the matrix
+    mine = A.copy()
+    assert scale_symmetric(mine, s, own=True) is mine
+    np.testing.assert_array_equal(mine.toarray(), scaled_before)

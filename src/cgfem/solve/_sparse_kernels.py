@@ -2,9 +2,12 @@
 
 The contact couplings touch a few thousand rows of a tangent with millions of entries; the
 rows they do not touch are copied, the others merged (:func:`add_csr`). A floating body's
-shift adds to the diagonal entries of its rows (:func:`diagonal_positions`), and the reduced
-saddle solver takes the bodies' leading block (:func:`leading_block`): scipy's general sum
-and slicing of the whole matrix cost a second each at half a million unknowns.
+shift adds to the diagonal entries of its rows (:func:`diagonal_positions`), the reduced
+saddle solver takes the bodies' leading block (:func:`leading_block`), and the AMG set-up
+scales and symmetrizes its own copy (:func:`scale_values`, :func:`symmetrize`,
+:func:`average_with_transpose`): scipy's
+general sums, products and slicing of the whole matrix cost a second and several copies of
+it each at half a million unknowns.
 """
 
 from __future__ import annotations
@@ -87,4 +90,87 @@ def leading_block(indptr, indices, data, n):
                 out_val[k] = data[a]
                 k += 1
         out_ptr[i + 1] = k
+    return out_ptr, out_ind, out_val
+
+
+@njit(cache=True)
+def scale_values(indptr, indices, data, s, out):
+    """The values of ``diag(s) A diag(s)`` on ``A``'s pattern into ``out`` (nnz,; ``data``
+    itself allowed): ``data[k] * s[i] * s[j]`` for entry ``k`` in row ``i``, column ``j``
+    (numpy's ``data * s_rows * s_cols``, bit for bit)."""
+    for i in range(indptr.size - 1):
+        for k in range(indptr[i], indptr[i + 1]):
+            out[k] = data[k] * s[i] * s[indices[k]]
+
+
+@njit(cache=True)
+def _transposed_position(indptr, indices, i, j):
+    """The position of entry ``(j, i)`` (row ``j``'s sorted columns), -1 if there is none."""
+    lo, hi = indptr[j], indptr[j + 1]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if indices[mid] < i:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo if lo < indptr[j + 1] and indices[lo] == i else -1
+
+
+@njit(cache=True)
+def symmetrize(indptr, indices, data):
+    """``(A + A^T) / 2`` in place on ``data`` for a square CSR ``A`` whose pattern is symmetric
+    (each pair averaged as ``0.5 * (a_ij + a_ji)``, scipy's bits); returns False, ``data``
+    untouched, if some entry has no transposed partner."""
+    n = indptr.size - 1
+    for i in range(n):
+        for k in range(indptr[i], indptr[i + 1]):
+            if _transposed_position(indptr, indices, i, indices[k]) < 0:
+                return False
+    for i in range(n):
+        for k in range(indptr[i], indptr[i + 1]):
+            j = indices[k]
+            if j > i:
+                t = _transposed_position(indptr, indices, i, j)
+                average = 0.5 * (data[k] + data[t])
+                data[k] = average
+                data[t] = average
+    return True
+
+
+@njit(cache=True)
+def average_with_transpose(indptr, indices, data, t_indptr, t_indices, t_data):
+    """The CSR arrays of ``(A + A^T) / 2`` from those of ``A`` and ``A^T`` (sorted, unique
+    columns): rows merged as :func:`add_csr` merges them, each value ``0.5 * (a + b)``, exact
+    zeros of the sum left out (scipy's ``0.5 * (A + A.T)``, bit for bit), in arrays of the
+    sum's size (counted first)."""
+    n = indptr.size - 1
+    out_ptr = np.empty(n + 1, indptr.dtype)
+    out_ptr[0] = 0
+    size = 0
+    for sweep in range(2):
+        if sweep == 1:
+            out_ind = np.empty(size, indices.dtype)
+            out_val = np.empty(size, data.dtype)
+        k = 0
+        for i in range(n):
+            a, a1, c, c1 = indptr[i], indptr[i + 1], t_indptr[i], t_indptr[i + 1]
+            while a < a1 or c < c1:
+                if c == c1 or (a < a1 and indices[a] < t_indices[c]):
+                    column, value = indices[a], data[a]
+                    a += 1
+                elif a == a1 or t_indices[c] < indices[a]:
+                    column, value = t_indices[c], t_data[c]
+                    c += 1
+                else:
+                    column, value = indices[a], data[a] + t_data[c]
+                    a += 1
+                    c += 1
+                if value != 0.0:
+                    if sweep == 1:
+                        out_ind[k] = column
+                        out_val[k] = 0.5 * value
+                    k += 1
+            if sweep == 1:
+                out_ptr[i + 1] = k
+        size = k
     return out_ptr, out_ind, out_val

@@ -24,7 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from cgfem.solve.linear import LinearSolverError, mode_bodies, scale_symmetric
+from cgfem.solve.linear import LinearSolverError, mode_bodies, scale_symmetric, symmetrize_own
 from cgfem.solve.multigrid import smoothed_aggregation, v_cycle
 
 #: inner iterations of one GMRES cycle
@@ -50,9 +50,10 @@ class AMGPreconditioner:
     (zero rows allowed; :func:`collapse_modes`), whose blocks also keep every aggregate of the
     finest level within one body (:func:`~cgfem.solve.multigrid.strength_within_bodies`);
     ``symmetric``: the hierarchy's restriction is ``P^T`` (CG) or built for a non-symmetric
-    ``A`` (GMRES). ``info``: ``setup_s``, ``levels``, ``operator_complexity``."""
+    ``A`` (GMRES); ``own``: ``A`` is the caller's to spend (scaled in place, no copy).
+    ``info``: ``setup_s``, ``levels``, ``operator_complexity``."""
 
-    def __init__(self, A: sp.csr_matrix, near_null: np.ndarray | None, symmetric: bool):
+    def __init__(self, A: sp.csr_matrix, near_null: np.ndarray | None, symmetric: bool, own: bool = False):
         tic = time.perf_counter()
         A = sp.csr_matrix(A, dtype=np.float64)
         d = A.diagonal()
@@ -60,9 +61,10 @@ class AMGPreconditioner:
             raise LinearSolverError("amg: zero diagonal entries, NaN or inf in the matrix")
         self.n, self.symmetric = A.shape[0], symmetric
         self._s = 1.0 / np.sqrt(np.abs(d))
-        As = scale_symmetric(A, self._s)
+        As = scale_symmetric(A, self._s, own)
+        del A
         if symmetric:
-            As = (0.5 * (As + As.T)).tocsr()
+            As = symmetrize_own(As)
         B, bodies = None, None
         if near_null is not None:
             near_null = np.asarray(near_null, float)

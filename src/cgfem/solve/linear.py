@@ -35,6 +35,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from cgfem.solve._sparse_kernels import average_with_transpose, scale_values, symmetrize
 from cgfem.solve.multigrid import smoothed_aggregation, v_cycle
 from cgfem.solve.pardiso import PardisoError, PardisoPattern, union_pattern, values_on
 
@@ -44,15 +45,33 @@ MAX_ITERATIONS = 1000  #: bound on the Krylov iterations of one pyamg solve
 GMRES_RESTART = 50
 
 
-def scale_symmetric(A: sp.spmatrix, s: np.ndarray) -> sp.csr_matrix:
-    """``diag(s) A diag(s)`` (n, n) for ``s`` (n,), as a new CSR matrix with the pattern of
-    ``A`` (explicit zeros dropped, as a product would) and the product's bits, in about half
-    the time of scipy's two sparse products."""
-    A = sp.csr_matrix(A)
-    data = A.data * np.repeat(s, np.diff(A.indptr)) * s[A.indices]
-    out = sp.csr_matrix((data, A.indices.copy(), A.indptr.copy()), shape=A.shape)
+def scale_symmetric(A: sp.spmatrix, s: np.ndarray, own: bool = False) -> sp.csr_matrix:
+    """``diag(s) A diag(s)`` (n, n) for ``s`` (n,) with the pattern of ``A`` (explicit zeros
+    dropped, as a product would) and the product's bits, in about half the time of scipy's
+    two sparse products: a new CSR matrix, or ``A`` itself scaled in place when the caller
+    ``own``s it (a CSR matrix)."""
+    if own and sp.issparse(A) and A.format == "csr":
+        out = A
+    else:
+        A = sp.csr_matrix(A)
+        out = sp.csr_matrix((np.empty(A.nnz), A.indices.copy(), A.indptr.copy()), shape=A.shape)
+    scale_values(A.indptr, A.indices, A.data, np.asarray(s, np.float64), out.data)
     out.eliminate_zeros()
     return out
+
+
+def symmetrize_own(A: sp.csr_matrix) -> sp.csr_matrix:
+    """``(A + A^T) / 2`` of a CSR matrix the caller owns, scipy's ``0.5 * (A + A.T)`` array for
+    array: on ``A``'s own values when its pattern is symmetric (no copy), else merged with
+    its transpose into arrays of the sum's size (scipy's sum holds about twice as many)."""
+    A.sum_duplicates()
+    if symmetrize(A.indptr, A.indices, A.data):
+        A.eliminate_zeros()
+        return A
+    T = A.T.tocsr()
+    T.sum_duplicates()
+    indptr, indices, data = average_with_transpose(A.indptr, A.indices, A.data, T.indptr, T.indices, T.data)
+    return sp.csr_matrix((data, indices, indptr), shape=A.shape)
 
 
 class LinearSolverError(RuntimeError):

@@ -103,6 +103,8 @@ def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0
         except RuntimeError as err:   # LinearSolverError: singular, no convergence, NaN
             result.reason = f"linear_solver: {err}"
             return result
+        if need:
+            K = None        # the next tangent replaces it: not two matrices held while it is assembled
         limited = du
         if limit is not None:
             limited = limit(du)

@@ -41,7 +41,7 @@ import scipy.sparse.linalg as spla
 
 from cgfem.solve._sparse_kernels import leading_block
 from cgfem.solve.krylov import AMGPreconditioner
-from cgfem.solve.linear import LinearSolver, LinearSolverError, build
+from cgfem.solve.linear import LinearSolver, LinearSolverError, build, symmetrize_own
 
 #: inner iterations of one GMRES cycle
 RESTART = 50
@@ -132,7 +132,7 @@ class ReducedSaddleSolver(LinearSolver):
         self.info.update(factorized_n=int(n_u), factorized_nnz=int(P.nnz))
         if preconditioner != "pyamg":
             if symmetric:
-                P = (0.5 * (P + P.T)).tocsr()
+                P = symmetrize_own(P)
             # the preconditioner of the system's previous matrix, if given, lends its analysis
             factor = build(P, preconditioner, symmetric=symmetric,
                            reuse=reuse._factor if isinstance(reuse, ReducedSaddleSolver) else None)
@@ -142,7 +142,8 @@ class ReducedSaddleSolver(LinearSolver):
             return
         # the Krylov path's preconditioner of the bodies' matrices (symmetrized if symmetric,
         # one coarse mode set per body, aggregates within bodies), of the reduced matrix
-        self._precondition = AMGPreconditioner(P, None if near_null is None else near_null[:n_u], symmetric)
+        self._precondition = AMGPreconditioner(P, None if near_null is None else near_null[:n_u], symmetric,
+                                               own=True)
 
     def _fit_rows(self, c: FitConstraint, rows: np.ndarray) -> sp.csr_matrix:
         """:meth:`FitConstraint.truncated_rows` of the patch's controls among its ``Z`` rows
@@ -247,14 +248,17 @@ class ReducedSaddleSolver(LinearSolver):
                x0: np.ndarray | None = None) -> tuple[np.ndarray, int, float, bool]:
         """A solve of the Krylov path (:class:`~cgfem.solve.solves.LinearSolves`): ``A x = b``
         by :meth:`iterate` with this preconditioner, the operator rebound to ``A``'s system
-        when ``A`` is a new matrix (with the same unknowns: a later Newton iteration's), so that
-        one system's blocks are held at a time (:meth:`solve` then solves that system too);
+        when ``A`` is a new matrix (with the same unknowns: a later Newton iteration's), and let
+        go after the solve, so that no system's blocks outlive it;
         ``(x, iterations, residual, reached)``; NaN raises
         :class:`~cgfem.solve.linear.LinearSolverError`."""
         if self._bound is not A:
             self._bind(sp.csr_matrix(A))
             self._bound = A
         x, iterations, residual = self.iterate(b, rtol, max_iterations, x0)
+        # on the Krylov path every Newton matrix is solved once: its blocks are let go (bound
+        # again if asked), so that they do not outlive it while the next one is assembled
+        self._bound = self.K = self.Kc = self._matvec = None
         if not np.isfinite(residual):
             raise LinearSolverError(f"{self.backend}: NaN in the Krylov iterates")
         return x, iterations, residual, bool(residual <= rtol)

@@ -29,6 +29,7 @@ whether the preconditioner was kept, refreshed, or the solve fell back.
 from __future__ import annotations
 
 import time
+import weakref
 from typing import Callable
 
 import numpy as np
@@ -78,7 +79,10 @@ class LinearSolves:
         self.indefinite, self.saddle, self.policy = indefinite, saddle, policy
         self.floating, self.order = floating, order
         self.log = log or (lambda message: None)
-        self._key, self._factor = None, None
+        #: the last matrix set up (a weak reference: Newton lets it go once solved, and a
+        #: solver that needs it again holds it itself) and its solver
+        self._key: weakref.ref | None = None
+        self._factor = None
         #: modified Newton: the last setup serves for a new matrix (or for None)
         self.frozen = False
         #: the Krylov path's kept preconditioner, and whether it was built on the current matrix
@@ -123,20 +127,25 @@ class LinearSolves:
         n = self._n = b.shape[0]
         if self.path(n) == KRYLOV:
             return self._krylov(K, b, rtol)
-        if self._key is not K and not (self.frozen and self._factor is not None):
+        if not self._is_last(K) and not (self.frozen and self._factor is not None):
             # the last matrix's solver lends its analysis where the pattern allows (and cannot
             # solve afterwards)
             previous, self._factor = self._factor, None
             self._factor = factorize(K, backend=self.backend, symmetric=self.symmetric,
                                      near_null=self.near_null, indefinite=self.indefinite, saddle=self.saddle,
                                      reuse=previous, order=self.order)
-            self._key = K
+            self._key = weakref.ref(K)
             if not self._logged:
                 self._logged = True
                 self.log(f"linear: direct, {self._factor.backend}, {n} unknowns")
         x = self._factor.solve(b, rtol)
         self.history.append((DIRECT, int(self._factor.info["iterations"][-1]), self._factor.backend))
         return x
+
+    def _is_last(self, K: sp.csr_matrix | None) -> bool:
+        """Whether ``K`` is the matrix last set up (None: the one a frozen solve keeps)."""
+        last = self._key() if self._key is not None else None
+        return last is K
 
     def again(self, b: np.ndarray) -> np.ndarray:
         """``b`` (n,) solved with the last matrix's factorization on the direct path, without a
@@ -155,10 +164,12 @@ class LinearSolves:
         """The Krylov path (module docstring)."""
         p = self.policy
         if K is None or (self.frozen and self._key is not None):
-            K = self._key
-        if K is not self._key:
+            K = self._key() if self._key is not None else None
+            if K is None:
+                raise LinearSolverError("no matrix to solve with again")
+        if not self._is_last(K):
             previous = self._factor
-            self._key, self._factor, self._fresh = K, None, False
+            self._key, self._factor, self._fresh = weakref.ref(K), None, False
             if self._direct_left > 0:       # a stall not long ago: factorized as well
                 self._direct_left -= 1
                 self._factor = self._factorize(K, previous)

@@ -109,6 +109,7 @@ class System:
         #: same unknowns (a new outer pass from where the last one ended), or at any unknowns
         #: of a linear system, reuses it
         self._bodies_tangent: tuple[np.ndarray, sp.csr_matrix] | None = None
+        self._constant_bodies = not any(b.finite for b in bodies)
 
     @property
     def items(self) -> list:
@@ -152,7 +153,9 @@ class System:
         couplings off it, plus the floating bodies' shift (tangent only)."""
         at = u[:self.offsets[-1]]
         kept = self._bodies_tangent
-        reuse = tangent and kept is not None and (self.linear or np.array_equal(kept[0], at))
+        # in small strain the bodies' own tangent (bulk, ghost penalty, the weak conditions'
+        # penalty) does not depend on the state: assembled once, with or without contact
+        reuse = tangent and kept is not None and (self._constant_bodies or np.array_equal(kept[0], at))
         r = np.zeros(self.n_dofs)
         parts = [item.add(u, t, r, tangent and not reuse) for item in self.body_items]
         couplings = self.contact.add(u, r, tangent) if self.contact else None
