@@ -1,53 +1,17 @@
 """Numba kernels of the system's tangent, on CSR arrays with sorted, unique columns per row.
 
 The contact couplings touch a few thousand rows of a tangent with millions of entries; the
-rows they do not touch are copied, the others merged (:func:`add_csr`). A floating body's
+rows they do not touch are copied, the others merged (:func:`sum_csr`). A floating body's
 shift adds to the diagonal entries of its rows (:func:`diagonal_positions`), the reduced
 saddle solver takes the bodies' leading block (:func:`leading_block`), and the AMG set-up
-scales and symmetrizes its own copy (:func:`scale_values`, :func:`symmetrize`,
-:func:`average_with_transpose`): scipy's
-general sums, products and slicing of the whole matrix cost a second and several copies of
-it each at half a million unknowns.
+scales and symmetrizes its own copy (:func:`scale_values`, :func:`symmetrize`, or
+:func:`sum_csr` with the transpose): scipy's general sums, products and slicing of the whole
+matrix cost a second and several copies of it each at half a million unknowns.
 """
-
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
-
-
-@njit(cache=True)
-def add_csr(indptr, indices, data, c_indptr, c_indices, c_data):
-    """``A + C`` for CSR ``A`` (``indptr``, ``indices``, ``data``) and ``C`` of the same shape,
-    both with sorted, unique column indices per row: the CSR arrays of the sum with sorted
-    columns and without zeros (an entry of either, or a sum of both, that is exactly zero is
-    left out), entry for entry what scipy's ``A + C`` gives. The index and value arrays are
-    views of arrays of ``nnz(A) + nnz(C)`` entries."""
-    n = indptr.size - 1
-    out_ptr = np.empty(n + 1, indptr.dtype)
-    out_ind = np.empty(indices.size + c_indices.size, indices.dtype)
-    out_val = np.empty(indices.size + c_indices.size, data.dtype)
-    out_ptr[0] = 0
-    k = 0
-    for i in range(n):
-        a, a1, c, c1 = indptr[i], indptr[i + 1], c_indptr[i], c_indptr[i + 1]
-        while a < a1 or c < c1:
-            if c == c1 or (a < a1 and indices[a] < c_indices[c]):
-                column, value = indices[a], data[a]
-                a += 1
-            elif a == a1 or c_indices[c] < indices[a]:
-                column, value = c_indices[c], c_data[c]
-                c += 1
-            else:
-                column, value = indices[a], data[a] + c_data[c]
-                a += 1
-                c += 1
-            if value != 0.0:
-                out_ind[k] = column
-                out_val[k] = value
-                k += 1
-        out_ptr[i + 1] = k
-    return out_ptr, out_ind[:k], out_val[:k]
 
 
 @njit(cache=True)
@@ -138,37 +102,41 @@ def symmetrize(indptr, indices, data):
 
 
 @njit(cache=True)
-def average_with_transpose(indptr, indices, data, t_indptr, t_indices, t_data):
-    """The CSR arrays of ``(A + A^T) / 2`` from those of ``A`` and ``A^T`` (sorted, unique
-    columns): rows merged as :func:`add_csr` merges them, each value ``0.5 * (a + b)``, exact
-    zeros of the sum left out (scipy's ``0.5 * (A + A.T)``, bit for bit), in arrays of the
-    sum's size (counted first)."""
+def sum_csr(indptr, indices, data, c_indptr, c_indices, c_data, factor):
+    """``factor (A + C)`` for CSR ``A`` (``indptr``, ``indices``, ``data``) and ``C`` of the same
+    shape, both with sorted, unique column indices per row: the CSR arrays of the sum with
+    sorted columns and without zeros (an entry of either, or a sum of both, that is exactly
+    zero is left out), each value ``factor * (a + c)``: entry for entry what scipy's
+    ``factor * (A + C)`` gives. The rows are merged twice, counting first, so that the arrays
+    have the sum's size."""
     n = indptr.size - 1
     out_ptr = np.empty(n + 1, indptr.dtype)
     out_ptr[0] = 0
+    out_ind = np.empty(0, indices.dtype)
+    out_val = np.empty(0, np.float64)
     size = 0
     for sweep in range(2):
         if sweep == 1:
             out_ind = np.empty(size, indices.dtype)
-            out_val = np.empty(size, data.dtype)
+            out_val = np.empty(size, np.float64)
         k = 0
         for i in range(n):
-            a, a1, c, c1 = indptr[i], indptr[i + 1], t_indptr[i], t_indptr[i + 1]
+            a, a1, c, c1 = indptr[i], indptr[i + 1], c_indptr[i], c_indptr[i + 1]
             while a < a1 or c < c1:
-                if c == c1 or (a < a1 and indices[a] < t_indices[c]):
+                if c == c1 or (a < a1 and indices[a] < c_indices[c]):
                     column, value = indices[a], data[a]
                     a += 1
-                elif a == a1 or t_indices[c] < indices[a]:
-                    column, value = t_indices[c], t_data[c]
+                elif a == a1 or c_indices[c] < indices[a]:
+                    column, value = c_indices[c], c_data[c]
                     c += 1
                 else:
-                    column, value = indices[a], data[a] + t_data[c]
+                    column, value = indices[a], data[a] + c_data[c]
                     a += 1
                     c += 1
                 if value != 0.0:
                     if sweep == 1:
                         out_ind[k] = column
-                        out_val[k] = 0.5 * value
+                        out_val[k] = factor * value
                     k += 1
             if sweep == 1:
                 out_ptr[i + 1] = k

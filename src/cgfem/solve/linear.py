@@ -35,7 +35,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from cgfem.solve._sparse_kernels import average_with_transpose, scale_values, symmetrize
+from cgfem.solve._sparse_kernels import scale_values, sum_csr, symmetrize
 from cgfem.solve.multigrid import smoothed_aggregation, v_cycle
 from cgfem.solve.pardiso import PardisoError, PardisoPattern, union_pattern, values_on
 
@@ -70,7 +70,7 @@ def symmetrize_own(A: sp.csr_matrix) -> sp.csr_matrix:
         return A
     T = A.T.tocsr()
     T.sum_duplicates()
-    indptr, indices, data = average_with_transpose(A.indptr, A.indices, A.data, T.indptr, T.indices, T.data)
+    indptr, indices, data = sum_csr(A.indptr, A.indices, A.data, T.indptr, T.indices, T.data, 0.5)
     return sp.csr_matrix((data, indices, indptr), shape=A.shape)
 
 

@@ -22,7 +22,7 @@ from cgfem.solve.floating import STRETCH_FLOOR_H, FloatingBodies, rotation_stret
 from cgfem.solve.items import Block, BodyItem
 from cgfem.solve.linear import rigid_body_modes
 from cgfem.solve.onset import OnsetLimit
-from cgfem.solve._sparse_kernels import add_csr
+from cgfem.solve._sparse_kernels import sum_csr
 from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
 from cgfem.solve.saddle import FitConstraint
 
@@ -53,8 +53,8 @@ def add_couplings(K: sp.csr_matrix, C: sp.spmatrix) -> sp.csr_matrix:
     if not K.has_canonical_format:
         return sp.csr_matrix(K + C)
     index = K.indices.dtype
-    indptr, indices, data = add_csr(K.indptr, K.indices, K.data, C.indptr.astype(index),
-                                    C.indices.astype(index), C.data.astype(np.float64))
+    indptr, indices, data = sum_csr(K.indptr, K.indices, K.data, C.indptr.astype(index),
+                                    C.indices.astype(index), C.data.astype(np.float64), 1.0)
     return sp.csr_matrix((data, indices, indptr), shape=K.shape)
 
 
