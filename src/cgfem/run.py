@@ -74,10 +74,12 @@ KRYLOV_FALLBACK_MEMORY = 0.7
 #: and their band factors besides the AMG hierarchy), per element order: chain2_steel at
 #: level 3 peaked at 4.8 GiB against 7.05 (0.68), planar at 6.3 against 19.2 (0.33); 1 (the
 #: factorization's) where a body is held by contact alone (chain3 at level 3: 11.7 against
-#: 13.8, with direct fallbacks of the reduced saddle) and at order 2 (chain2_steel at level 1
-#: peaked at 3.77 GB against 3.63 and 0.54 for the interpreter; planar at level 2 at 20.4
-#: against 36.5, which this factor therefore refuses on a 25 GB machine)
-KRYLOV_FIT_MEMORY = {1: 0.75, 2: 1.0}
+#: 13.8, with direct fallbacks of the reduced saddle); at order 2 the triquadratic Krylov
+#: factor and a little for the fit's own arrays: chain2_steel at level 1 peaked at 2.40 GB
+#: against 3.63 and 0.54 for the interpreter (0.51), planar at level 2 at 17.5 GB against 36.5
+#: (0.46; before the fitted surface's seeds were chunked and the Newton matrices held once,
+#: 3.77 and 20.4 GB)
+KRYLOV_FIT_MEMORY = {1: 0.75, 2: 0.67}
 #: the direct path's factor for a fitted surface (its fit rows, patch matrices and band
 #: factors, and the reduced saddle solver's preconditioner factor): chain3 at level 1 peaked
 #: at 1.19 GB against 0.59 (and 0.54 for the interpreter), the chains at order 2, level 0 at
