@@ -153,3 +153,39 @@ def test_merged_columns_move_points_as_the_raw_basis():
         live = row[c != 0.0]
         assert live.size == np.unique(live).size
     assert merged_nodes.shape[1] == max(np.unique(nodes[i][valid[i]]).size for i in range(n))
+
+
+def test_the_basis_in_chunks_is_the_basis_at_once(monkeypatch):
+    """The fitted surface evaluates its basis a chunk of points at a time: the reference
+    geometry, coefficients and controls of the sphere's seeds are those of one evaluation,
+    array for array; and chunks whose points have fewer distinct controls than the widest
+    (random controls, as in the test above) are padded as :func:`merge_columns` pads."""
+    from cgfem.contact import fitted
+    master = _pair(False).surface
+    piece, theta = master.seed_piece, master.seed_theta
+    whole = master._basis(piece, theta)
+    monkeypatch.setattr(fitted, "BASIS_CHUNK", 37)
+    assert piece.size > 100 * fitted.BASIS_CHUNK
+    for a, b in zip(whole, master._basis(piece, theta)):
+        assert a.shape == b.shape and np.array_equal(a, b)
+
+    rng = np.random.default_rng(4)
+    n, w = 200, 12
+    nodes = rng.integers(0, 9, (n, w))
+    nodes[:100, 6:] = nodes[:100, :1]                  # the first chunks' points: fewer controls
+    coef = rng.normal(size=(n, 6, w))
+    valid = np.ones((n, w), bool)
+    ref = rng.normal(size=(n, 6, 3))
+
+    def merged(rows):
+        controls, values = merge_columns(nodes[rows], coef[rows], valid[rows])
+        return ref[rows], values, controls
+
+    class Raw:
+        def _basis_chunk(self, rows, _theta):
+            return merged(rows)
+    expected = merged(np.arange(n))
+    chunked = FittedSurface._basis(Raw(), np.arange(n), np.zeros((n, 2)))
+    assert merged(np.arange(37))[2].shape[1] < expected[2].shape[1]
+    for a, b in zip(expected, chunked):
+        assert a.shape == b.shape and np.array_equal(a, b)

@@ -117,11 +117,11 @@ def test_the_leading_block_is_scipys_slice_array_for_array():
         assert np.array_equal(data, expected.data)
 
 
-def test_own_symmetrization_and_scaling_are_scipys_array_for_array():
-    """The AMG set-up's ``diag(s) A diag(s)`` and ``(A + A^T) / 2`` on a matrix of symmetric
-    pattern (with a pair that cancels exactly, which scipy drops) give scipy's arrays; a
-    pattern that is not symmetric takes scipy's sum."""
-    from cgfem.solve.linear import scale_symmetric, symmetrize_own
+def test_scaling_and_symmetric_part_are_scipys_array_for_array():
+    """The AMG set-up's ``diag(s) A diag(s)`` and ``(A + A^T) / 2`` give scipy's arrays, on a
+    symmetric pattern with a pair that cancels exactly (which scipy drops) and on a pattern
+    that is not symmetric; the input is left as it was."""
+    from cgfem.solve.linear import scale_symmetric, symmetric_part
     rng = np.random.default_rng(6)
     R = sp.random(40, 40, density=0.2, format="csr", random_state=7)
     A = sp.csr_matrix(R + R.T + sp.eye(40))
@@ -137,13 +137,14 @@ def test_own_symmetrization_and_scaling_are_scipys_array_for_array():
     k = np.flatnonzero(i < j)[0]
     scaled[j[k], i[k]] = -scaled[i[k], j[k]]                          # a pair that cancels
     reference = sp.csr_matrix(0.5 * (scaled + scaled.T))
-    own = symmetrize_own(scaled.copy())
+    before = scaled.copy()
+    part = symmetric_part(scaled)
     for name in ("indptr", "indices", "data"):
-        assert np.array_equal(getattr(own, name), getattr(reference, name)), name
-    assert own.nnz < scaled.nnz
-    # a pattern that is not symmetric: merged with the transpose, scipy's arrays too
+        assert np.array_equal(getattr(part, name), getattr(reference, name)), name
+        assert np.array_equal(getattr(scaled, name), getattr(before, name)), name
+    assert part.nnz < scaled.nnz
     skew = sp.csr_matrix(sp.triu(A, 1) + sp.eye(40))
-    merged, reference = symmetrize_own(skew.copy()), sp.csr_matrix(0.5 * (skew + skew.T))
+    merged, reference = symmetric_part(skew), sp.csr_matrix(0.5 * (skew + skew.T))
     for name in ("indptr", "indices", "data"):
         assert np.array_equal(getattr(merged, name), getattr(reference, name)), name
     # scaled in place when the caller owns the matrix

@@ -97,8 +97,8 @@ def merge_columns(nodes: np.ndarray, coef: np.ndarray, valid: np.ndarray) -> tup
     return out_nodes, np.moveaxis(out.reshape(n, width, -1), 1, 2).copy()
 
 
-#: seeds whose basis :meth:`FittedSurface._seed_basis` evaluates at once
-SEED_CHUNK = 16384
+#: points whose basis :meth:`FittedSurface._basis` evaluates at once
+BASIS_CHUNK = 16384
 
 
 class FittedSurface(RaySurface):
@@ -128,11 +128,12 @@ class FittedSurface(RaySurface):
         keep = np.isin(seeds.patch, list(self.local))
         self.seed_piece = np.array([self.local[int(p)] for p in seeds.patch[keep]], np.int64)
         self.seed_theta = np.ascontiguousarray(seeds.uv[keep])
-        self._seed_X, coef, nodes = self._seed_basis()
+        ref, coef, nodes = self._basis(self.seed_piece, self.seed_theta)
+        self._seed_X = ref[:, 0].copy()
         n, w = nodes.shape
         #: controls a point moves with (at the seeds; a point elsewhere may have a few more)
         self.width = w
-        self._seed_S = sp.csr_matrix((coef.ravel(), nodes.ravel(), np.arange(0, n * w + 1, w)),
+        self._seed_S = sp.csr_matrix((coef[:, 0].ravel(), nodes.ravel(), np.arange(0, n * w + 1, w)),
                                      shape=(n, self.n_nodes))
         self.spacing = (float(cKDTree(self._seed_X).query(self._seed_X, k=2)[0][:, 1].max())
                         if n > 1 else self.h)
@@ -153,30 +154,27 @@ class FittedSurface(RaySurface):
         Z = np.asarray(z, float).reshape(-1, 3)
         return [f.T @ Z[a:b] for f, a, b in zip(self.fits, self.node_offsets[:-1], self.node_offsets[1:])]
 
-    def _seed_basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """At the seeds: the reference points (n, 3), the basis values on the free controls
-        (n, W) and those controls (n, W), as :meth:`_basis` gives them for all seeds at once
-        (rows padded with their first control and value 0 to the widest), evaluated
-        :data:`SEED_CHUNK` seeds at a time: a point's basis before its equal controls are
-        merged is several times wider (chain2_steel at order 2, level 1: 2.4 GB for all)."""
-        parts = []
-        for start in range(0, self.seed_piece.size, SEED_CHUNK):
-            chunk = slice(start, start + SEED_CHUNK)
-            ref, coef, nodes = self._basis(self.seed_piece[chunk], self.seed_theta[chunk])
-            parts.append((ref[:, 0], coef[:, 0], nodes))
-        if not parts:
-            return np.zeros((0, 3)), np.zeros((0, 1)), np.zeros((0, 1), np.int64)
-        width = max(nodes.shape[1] for _, _, nodes in parts)
-        values = np.concatenate([np.pad(c, ((0, 0), (0, width - c.shape[1]))) for _, c, _ in parts])
-        controls = np.concatenate([np.concatenate([n] + [n[:, :1]] * (width - n.shape[1]), axis=1)
-                                   for _, _, n in parts])
-        return np.concatenate([x for x, _, _ in parts]), values, controls
-
     # -- the basis at points -----------------------------------------------------------
     def _basis(self, piece: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """At points ``(piece, theta)`` ((n,), (n, 2); ``piece`` a fit's index): the reference
         geometry ``x, x_s, x_t, x_ss, x_st, x_tt`` (n, 6, 3), the coefficients of the same on
-        the free controls (n, 6, W) and those controls (n, W), as surface nodes."""
+        the free controls (n, 6, W) and those controls (n, W), as surface nodes; rows with
+        fewer controls padded with their first control and coefficient 0
+        (:func:`merge_columns`). Evaluated :data:`BASIS_CHUNK` points at a time: a point's
+        basis before its equal controls are merged is several times wider (the seeds of
+        chain2_steel at order 2, level 1 held 2.7 GB of it at once)."""
+        if piece.size <= BASIS_CHUNK:
+            return self._basis_chunk(piece, theta)
+        parts = [self._basis_chunk(piece[k:k + BASIS_CHUNK], theta[k:k + BASIS_CHUNK])
+                 for k in range(0, piece.size, BASIS_CHUNK)]
+        width = max(nodes.shape[1] for _, _, nodes in parts)
+        coef = np.concatenate([np.pad(c, ((0, 0), (0, 0), (0, width - c.shape[2]))) for _, c, _ in parts])
+        nodes = np.concatenate([np.concatenate([n] + [n[:, :1]] * (width - n.shape[1]), axis=1)
+                                for _, _, n in parts])
+        return np.concatenate([ref for ref, _, _ in parts]), coef, nodes
+
+    def _basis_chunk(self, piece: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`_basis` of points all at once."""
         n = piece.size
         ref = np.zeros((n, 6, 3))
         coef = np.zeros((n, 6, self._spread))

@@ -4,9 +4,9 @@ The contact couplings touch a few thousand rows of a tangent with millions of en
 rows they do not touch are copied, the others merged (:func:`sum_csr`). A floating body's
 shift adds to the diagonal entries of its rows (:func:`diagonal_positions`), the reduced
 saddle solver takes the bodies' leading block (:func:`leading_block`), and the AMG set-up
-scales and symmetrizes its own copy (:func:`scale_values`, :func:`symmetrize`, or
-:func:`sum_csr` with the transpose): scipy's general sums, products and slicing of the whole
-matrix cost a second and several copies of it each at half a million unknowns.
+scales its own copy (:func:`scale_values`) and adds its transpose (:func:`sum_csr`): scipy's
+general sums, products and slicing of the whole matrix cost a second and several copies of
+it each at half a million unknowns.
 """
 from __future__ import annotations
 
@@ -15,20 +15,26 @@ from numba import njit
 
 
 @njit(cache=True)
+def _position(indptr, indices, row, column):
+    """The position of entry ``(row, column)`` (binary search in the row's sorted columns), -1
+    if there is none."""
+    lo, hi = indptr[row], indptr[row + 1]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if indices[mid] < column:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo if lo < indptr[row + 1] and indices[lo] == column else -1
+
+
+@njit(cache=True)
 def diagonal_positions(indptr, indices, rows):
     """The position in ``indices`` of the diagonal entry of each row of ``rows`` (k,), -1
-    where the row has none (binary search in its sorted columns)."""
+    where the row has none."""
     out = np.empty(rows.size, np.int64)
     for r in range(rows.size):
-        i = rows[r]
-        lo, hi = indptr[i], indptr[i + 1]
-        while lo < hi:
-            mid = (lo + hi) // 2
-            if indices[mid] < i:
-                lo = mid + 1
-            else:
-                hi = mid
-        out[r] = lo if lo < indptr[i + 1] and indices[lo] == i else -1
+        out[r] = _position(indptr, indices, rows[r], rows[r])
     return out
 
 
@@ -65,40 +71,6 @@ def scale_values(indptr, indices, data, s, out):
     for i in range(indptr.size - 1):
         for k in range(indptr[i], indptr[i + 1]):
             out[k] = data[k] * s[i] * s[indices[k]]
-
-
-@njit(cache=True)
-def _transposed_position(indptr, indices, i, j):
-    """The position of entry ``(j, i)`` (row ``j``'s sorted columns), -1 if there is none."""
-    lo, hi = indptr[j], indptr[j + 1]
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if indices[mid] < i:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo if lo < indptr[j + 1] and indices[lo] == i else -1
-
-
-@njit(cache=True)
-def symmetrize(indptr, indices, data):
-    """``(A + A^T) / 2`` in place on ``data`` for a square CSR ``A`` whose pattern is symmetric
-    (each pair averaged as ``0.5 * (a_ij + a_ji)``, scipy's bits); returns False, ``data``
-    untouched, if some entry has no transposed partner."""
-    n = indptr.size - 1
-    for i in range(n):
-        for k in range(indptr[i], indptr[i + 1]):
-            if _transposed_position(indptr, indices, i, indices[k]) < 0:
-                return False
-    for i in range(n):
-        for k in range(indptr[i], indptr[i + 1]):
-            j = indices[k]
-            if j > i:
-                t = _transposed_position(indptr, indices, i, j)
-                average = 0.5 * (data[k] + data[t])
-                data[k] = average
-                data[t] = average
-    return True
 
 
 @njit(cache=True)

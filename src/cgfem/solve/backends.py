@@ -21,7 +21,8 @@ up to :data:`SUPERLU_MAX_DOFS` (under 1 s), then pyamg. Non-symmetric systems go
 else superlu (pyamg only on request); so do saddle-point systems (``indefinite``: the fit
 constraints of ``nurbs_fit``) up to :data:`SADDLE_DIRECT_DOFS` (triquadratic elements:
 :data:`SADDLE_DIRECT_ORDER2_DOFS`), which pyamg cannot solve at all; larger ones, their
-constraints given, are solved on the bodies' dofs (:mod:`cgfem.solve.saddle`). Peak memory at 286k: pardiso 4.1 GB, pyamg 0.9 GB.
+constraints given, are solved on the bodies' dofs (:mod:`cgfem.solve.saddle`). Peak memory
+at 286k: pardiso 4.1 GB, pyamg 0.9 GB.
 """
 
 from __future__ import annotations

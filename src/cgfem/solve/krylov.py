@@ -24,7 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from cgfem.solve.linear import LinearSolverError, mode_bodies, scale_symmetric, symmetrize_own
+from cgfem.solve.linear import LinearSolverError, mode_bodies, scale_symmetric, symmetric_part
 from cgfem.solve.multigrid import smoothed_aggregation, v_cycle
 
 #: inner iterations of one GMRES cycle
@@ -62,9 +62,8 @@ class AMGPreconditioner:
         self.n, self.symmetric = A.shape[0], symmetric
         self._s = 1.0 / np.sqrt(np.abs(d))
         As = scale_symmetric(A, self._s, own)
-        del A
         if symmetric:
-            As = symmetrize_own(As)
+            As = symmetric_part(As)
         B, bodies = None, None
         if near_null is not None:
             near_null = np.asarray(near_null, float)

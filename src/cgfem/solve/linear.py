@@ -35,7 +35,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from cgfem.solve._sparse_kernels import scale_values, sum_csr, symmetrize
+from cgfem.solve._sparse_kernels import scale_values, sum_csr
 from cgfem.solve.multigrid import smoothed_aggregation, v_cycle
 from cgfem.solve.pardiso import PardisoError, PardisoPattern, union_pattern, values_on
 
@@ -60,14 +60,13 @@ def scale_symmetric(A: sp.spmatrix, s: np.ndarray, own: bool = False) -> sp.csr_
     return out
 
 
-def symmetrize_own(A: sp.csr_matrix) -> sp.csr_matrix:
-    """``(A + A^T) / 2`` of a CSR matrix the caller owns, scipy's ``0.5 * (A + A.T)`` array for
-    array: on ``A``'s own values when its pattern is symmetric (no copy), else merged with
-    its transpose into arrays of the sum's size (scipy's sum holds about twice as many)."""
+def symmetric_part(A: sp.csr_matrix) -> sp.csr_matrix:
+    """``(A + A^T) / 2`` of a CSR matrix, scipy's ``0.5 * (A + A.T)`` array for array, merged
+    with the transpose into arrays of the sum's size (scipy's sum holds about twice as many;
+    the examples' patterns are never exactly symmetric, exact zeros being dropped on one
+    side, so the union is always formed)."""
+    A = sp.csr_matrix(A)
     A.sum_duplicates()
-    if symmetrize(A.indptr, A.indices, A.data):
-        A.eliminate_zeros()
-        return A
     T = A.T.tocsr()
     T.sum_duplicates()
     indptr, indices, data = sum_csr(A.indptr, A.indices, A.data, T.indptr, T.indices, T.data, 0.5)

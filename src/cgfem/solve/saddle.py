@@ -41,7 +41,7 @@ import scipy.sparse.linalg as spla
 
 from cgfem.solve._sparse_kernels import leading_block
 from cgfem.solve.krylov import AMGPreconditioner
-from cgfem.solve.linear import LinearSolver, LinearSolverError, build, symmetrize_own
+from cgfem.solve.linear import LinearSolver, LinearSolverError, build, symmetric_part
 
 #: inner iterations of one GMRES cycle
 RESTART = 50
@@ -132,7 +132,7 @@ class ReducedSaddleSolver(LinearSolver):
         self.info.update(factorized_n=int(n_u), factorized_nnz=int(P.nnz))
         if preconditioner != "pyamg":
             if symmetric:
-                P = symmetrize_own(P)
+                P = symmetric_part(P)
             # the preconditioner of the system's previous matrix, if given, lends its analysis
             factor = build(P, preconditioner, symmetric=symmetric,
                            reuse=reuse._factor if isinstance(reuse, ReducedSaddleSolver) else None)

@@ -166,7 +166,7 @@ class LinearSolves:
         if K is None or (self.frozen and self._key is not None):
             K = self._key() if self._key is not None else None
             if K is None:
-                raise LinearSolverError("no matrix to solve with again")
+                raise LinearSolverError("the last matrix is gone: nothing to solve with")
         if not self._is_last(K):
             previous = self._factor
             self._key, self._factor, self._fresh = weakref.ref(K), None, False

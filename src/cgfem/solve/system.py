@@ -107,9 +107,10 @@ class System:
         #: the bodies' stacked tangent and the body unknowns it was assembled at: it depends
         #: on nothing else (not the load factor, not the frozen stress), so an assembly at the
         #: same unknowns (a new outer pass from where the last one ended), or at any unknowns
-        #: of a linear system, reuses it
+        #: in small strain (bulk, ghost penalty and the weak conditions' penalty constant,
+        #: with or without contact), reuses it
         self._bodies_tangent: tuple[np.ndarray, sp.csr_matrix] | None = None
-        self._constant_bodies = not any(b.finite for b in bodies)
+        self._small_strain = not any(b.finite for b in bodies)
 
     @property
     def items(self) -> list:
@@ -119,7 +120,7 @@ class System:
     @property
     def linear(self) -> bool:
         """Small strain without contact: one tangent serves every iteration."""
-        return not any(b.finite for b in self.bodies) and not self.contact
+        return self._small_strain and not self.contact
 
     @property
     def symmetric(self) -> bool:
@@ -153,9 +154,7 @@ class System:
         couplings off it, plus the floating bodies' shift (tangent only)."""
         at = u[:self.offsets[-1]]
         kept = self._bodies_tangent
-        # in small strain the bodies' own tangent (bulk, ghost penalty, the weak conditions'
-        # penalty) does not depend on the state: assembled once, with or without contact
-        reuse = tangent and kept is not None and (self._constant_bodies or np.array_equal(kept[0], at))
+        reuse = tangent and kept is not None and (self._small_strain or np.array_equal(kept[0], at))
         r = np.zeros(self.n_dofs)
         parts = [item.add(u, t, r, tangent and not reuse) for item in self.body_items]
         couplings = self.contact.add(u, r, tangent) if self.contact else None
