@@ -75,9 +75,9 @@ KRYLOV_FALLBACK_MEMORY = 0.7
 #: level 3 peaked at 4.8 GiB against 7.05 (0.68), planar at 6.3 against 19.2 (0.33); 1 (the
 #: factorization's) where a body is held by contact alone (chain3 at level 3: 11.7 against
 #: 13.8, with direct fallbacks of the reduced saddle); at order 2 the triquadratic Krylov
-#: factor and a little for the fit's own arrays: chain2_steel at level 1 peaked at 2.40 GB
-#: against 3.63 and 0.54 for the interpreter (0.51), planar at level 2 at 17.5 GB against 36.5
-#: (0.46; before the fitted surface's basis was chunked and the Newton matrices held once,
+#: factor and a little for the fit's own arrays: chain2_steel at level 1 peaked at 2.51 GB
+#: against 3.63 and 0.54 for the interpreter (0.54), planar at level 2 at 18.4 GB against 36.5
+#: (0.49; before the fitted surface's basis was chunked and the Newton matrices held once,
 #: 3.77 and 20.4 GB)
 KRYLOV_FIT_MEMORY = {1: 0.75, 2: 0.67}
 #: the direct path's factor for a fitted surface (its fit rows, patch matrices and band

@@ -23,7 +23,7 @@ pytestmark = pytest.mark.slow
 CASE = CASES / "planar.yaml"
 RESULTANT = 2.0 * 1e12 * 0.01 ** 3 / 6.0 * 0.0025
 #: bytes the order-2 level-2 run with nurbs_fit needs inside a test process: its peak alone
-#: is 17.5 GB (one thread; docs/performance.md, "Memory"; 20.4 GB before 2026-11-29), but the
+#: is 18.4 GB (one thread; docs/performance.md, "Memory"; 20.4 GB before 2026-11-29), but the
 #: process also holds what earlier tests left (on a 25 GB machine it was killed for memory
 #: after the nurbs_fe run)
 NURBS_FIT_LEVEL_2_PEAK = 32e9
@@ -126,7 +126,7 @@ def test_order_2_contact_force_is_the_exact_resultant(tmp_path, surface, level):
     """With triquadratic hexahedra the NURBS definitions carry the lateral tractions' exact
     resultant too: the contact force balances the lower body's load to 1e-8 and that load is
     the closed form to 1e-9 (measured at level 0: 1.4e-11 with nurbs_fe; at level 2 3e-12 and
-    3e-11 with nurbs_fit, 1.4e-11 since 2026-11-29). ``nurbs_fit`` at level 2 peaks at 17.5 GB
+    3e-11 with nurbs_fit, 1.4e-11 since 2026-11-29). ``nurbs_fit`` at level 2 peaks at 18.4 GB
     (24.5 GB estimated): it runs where the machine holds that beside what earlier tests of
     the process keep, and is skipped elsewhere."""
     if (surface, level) == ("nurbs_fit", 2) and machine_memory() < NURBS_FIT_LEVEL_2_PEAK:
