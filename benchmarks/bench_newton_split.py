@@ -95,7 +95,8 @@ def measure(case_path: Path, level: int, surface: str, order: int, krylov_min_do
     timer.wrap(BodyItem, "add", "bulk", lambda self, u, t, r, tangent: tangent)
     timer.wrap(ContactSet, "add", "contact", lambda self, u, r, tangent, update=True: tangent)
     policy = DEFAULT_POLICY if krylov_min_dofs is None else \
-        dataclasses.replace(DEFAULT_POLICY, krylov_min_dofs=krylov_min_dofs, krylov_order2_min_dofs=krylov_min_dofs,
+        dataclasses.replace(DEFAULT_POLICY, krylov_min_dofs=krylov_min_dofs,
+                            krylov_nonsymmetric_min_dofs=krylov_min_dofs, krylov_order2_min_dofs=krylov_min_dofs,
                             krylov_floating_min_dofs=krylov_min_dofs, krylov_saddle_min_dofs=krylov_min_dofs)
     if refresh_rate is not None:
         policy = dataclasses.replace(policy, krylov_refresh_rate=refresh_rate)

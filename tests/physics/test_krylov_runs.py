@@ -23,7 +23,8 @@ from tests.support.paths import CASES
 #: every test here solves a whole problem
 pytestmark = pytest.mark.slow
 
-KRYLOV = replace(SolverPolicy(), krylov_min_dofs=0, krylov_floating_min_dofs=0, krylov_saddle_min_dofs=0)
+KRYLOV = replace(SolverPolicy(), krylov_min_dofs=0, krylov_nonsymmetric_min_dofs=0, krylov_floating_min_dofs=0,
+                 krylov_saddle_min_dofs=0)
 
 
 def first_step(name: str, fraction: float = 1.0):
@@ -142,7 +143,8 @@ def test_krylov_path_solves_the_fitted_steel_chain_and_falls_back_when_stalled(t
 
 
 def test_a_body_held_by_contact_alone_keeps_the_direct_path_longer():
-    """chain3's middle link has no displacement conditions: with ``krylov_min_dofs = 0`` its
+    """chain3's middle link has no displacement conditions: with ``krylov_min_dofs = 0`` (and
+    ``krylov_nonsymmetric_min_dofs``) its
     Newton systems still take the direct path (below ``krylov_floating_min_dofs``), while
     chain2_steel's take the Krylov path; the built system and the case file agree on which
     is which."""
@@ -150,7 +152,7 @@ def test_a_body_held_by_contact_alone_keeps_the_direct_path_longer():
     from cgfem.solve.solves import DIRECT, KRYLOV, LinearSolves
     from cgfem.solve.system import System
 
-    policy = replace(SolverPolicy(), krylov_min_dofs=0)
+    policy = replace(SolverPolicy(), krylov_min_dofs=0, krylov_nonsymmetric_min_dofs=0)
     for name, floating in (("chain3", True), ("chain2_steel", False)):
         case = first_step(name)
         models, _, solids = build_bodies(case, 0, "nurbs_fe", lambda message: None)

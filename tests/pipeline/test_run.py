@@ -64,8 +64,8 @@ CRUSH = textwrap.dedent("""\
 
 
 #: a policy under which every system takes the direct path
-DIRECT_ONLY = replace(DEFAULT_POLICY, krylov_min_dofs=10**9, krylov_order2_min_dofs=10**9,
-                      krylov_saddle_min_dofs=10**9)
+DIRECT_ONLY = replace(DEFAULT_POLICY, krylov_min_dofs=10**9, krylov_nonsymmetric_min_dofs=10**9,
+                      krylov_order2_min_dofs=10**9, krylov_saddle_min_dofs=10**9)
 
 def _write(tmp_path, text, name="case.yaml"):
     path = tmp_path / name
@@ -213,31 +213,32 @@ def test_memory_estimate_follows_the_solve_path():
 
 def test_a_body_held_by_contact_alone_keeps_the_direct_path_longer():
     """The estimate's path follows ``krylov_floating_min_dofs`` where a body has no
-    displacement conditions (chain3's middle link) and ``krylov_min_dofs`` elsewhere: at a
-    size between the two (with ``krylov_min_dofs = 20_000``) chain2_steel takes the Krylov
-    path and chain3 the direct one."""
+    displacement conditions (chain3's middle link) and ``krylov_nonsymmetric_min_dofs``
+    (chain2_steel, finite strain) elsewhere: at a size between the two (with the latter at
+    20 000) chain2_steel takes the Krylov path and chain3 the direct one."""
     from cgfem.case import load_case
     from cgfem.run import estimate_memory
     measures = {name: LINK_MEASURES for name in ("link_a", "link_b", "link_c")}
     steel, chain3 = (load_case(CASES / f"{name}.yaml") for name in ("chain2_steel", "chain3"))
     assert chain3.held_by_contact_alone and not steel.held_by_contact_alone
-    policy = replace(DEFAULT_POLICY, krylov_min_dofs=20_000)
+    policy = replace(DEFAULT_POLICY, krylov_nonsymmetric_min_dofs=20_000)
     _, dofs, krylov = estimate_memory(steel, 2, measures, policy=policy)
-    assert policy.krylov_min_dofs <= dofs < policy.krylov_floating_min_dofs and krylov
+    assert policy.krylov_nonsymmetric_min_dofs <= dofs < policy.krylov_floating_min_dofs and krylov
     _, dofs, krylov = estimate_memory(chain3, 2, measures, policy=policy)
     assert policy.krylov_min_dofs <= dofs < policy.krylov_floating_min_dofs and not krylov
 
 
 def test_triquadratic_systems_take_the_krylov_path_from_their_own_threshold():
-    """``krylov_order2_min_dofs`` (20k) is below ``krylov_min_dofs`` (100k): chain2_steel with
-    triquadratic elements at level 1 (about 37k unknowns) takes the Krylov path, with
-    trilinear ones at level 2 (about 29k) the direct one; chain3, whose middle link is held by
+    """``krylov_order2_min_dofs`` (20k) is below ``krylov_nonsymmetric_min_dofs`` (100k, contact
+    in finite strain at order 1): chain2_steel with triquadratic elements at level 1 (about
+    37k unknowns) takes the Krylov path, with trilinear ones at level 2 (about 29k) the direct
+    one; chain3, whose middle link is held by
     contact alone, keeps the direct path at order 2, level 1 (about 72k)."""
     from cgfem.case import load_case
     from cgfem.run import estimate_memory
     measures = {name: LINK_MEASURES for name in ("link_a", "link_b", "link_c")}
     steel, chain3 = (load_case(CASES / f"{name}.yaml") for name in ("chain2_steel", "chain3"))
-    low, high = DEFAULT_POLICY.krylov_order2_min_dofs, DEFAULT_POLICY.krylov_min_dofs
+    low, high = DEFAULT_POLICY.krylov_order2_min_dofs, DEFAULT_POLICY.krylov_nonsymmetric_min_dofs
     _, dofs, krylov = estimate_memory(steel, 2, measures, 1)
     assert low <= dofs < high and not krylov
     _, dofs, krylov = estimate_memory(steel, 1, measures, 2)

@@ -58,7 +58,7 @@ def two_bodies(symmetric: bool = True, coupling: float = 1.0, seed: int = 0):
 
 
 def policy(**changes) -> SolverPolicy:
-    return replace(SolverPolicy(), krylov_min_dofs=0, **changes)
+    return replace(SolverPolicy(), krylov_min_dofs=0, krylov_nonsymmetric_min_dofs=0, **changes)
 
 
 @pytest.mark.parametrize("symmetric", [True, False])
@@ -207,8 +207,9 @@ def test_after_a_stall_the_next_matrices_are_factorized_directly(stay):
 
 
 def test_direct_below_the_size_thresholds_and_for_saddle_points_not_given():
-    """``auto`` takes the direct path below ``krylov_min_dofs``, with a body held by contact
-    alone below ``krylov_floating_min_dofs``, for a saddle point below
+    """``auto`` takes the direct path below ``krylov_min_dofs`` (a non-symmetric system below
+    ``krylov_nonsymmetric_min_dofs``), with a body held by contact alone below
+    ``krylov_floating_min_dofs``, for a saddle point below
     ``krylov_saddle_min_dofs`` or whose fit constraints are not given; an explicit backend
     always."""
     K, b, B = two_bodies(True)
@@ -227,6 +228,14 @@ def test_direct_below_the_size_thresholds_and_for_saddle_points_not_given():
     assert LinearSolves("auto", B, policy=given, order=1).path(n) == DIRECT
     given = replace(given, krylov_floating_min_dofs=n + 1)
     assert LinearSolves("auto", B, policy=given, order=2, floating=True).path(n) == DIRECT
+    # contact in finite strain (a non-symmetric system) has its own threshold at order 1
+    given = replace(SolverPolicy(), krylov_min_dofs=0, krylov_nonsymmetric_min_dofs=n + 1)
+    assert LinearSolves("auto", B, symmetric=False, policy=given).path(n) == DIRECT
+    assert LinearSolves("auto", B, symmetric=True, policy=given).path(n) == KRYLOV
+    assert LinearSolves("auto", B, symmetric=False, policy=replace(given, krylov_nonsymmetric_min_dofs=n)).path(n) \
+        == KRYLOV
+    assert LinearSolves("auto", B, symmetric=False, policy=replace(given, krylov_order2_min_dofs=n),
+                        order=2).path(n) == KRYLOV
     assert LinearSolves("auto", B, indefinite=True, policy=policy()).path(n) == DIRECT
     saddle = (n, [])
     for least, path in ((n, KRYLOV), (n + 1, DIRECT)):

@@ -90,9 +90,14 @@ class SolverPolicy:
 
     Linear solves (:class:`~cgfem.solve.solves.LinearSolves`)
     ----------------------------------------------------------
-    krylov_min_dofs : ``linear: auto`` solves a system of trilinear elements of at least this
-        many unknowns by the preconditioned Krylov path, smaller ones by the direct path
-        (:mod:`cgfem.solve.backends`).
+    krylov_min_dofs : ``linear: auto`` solves a symmetric system of trilinear elements (small
+        strain, or no contact) of at least this many unknowns by the preconditioned Krylov
+        path, smaller ones by the direct path (:mod:`cgfem.solve.backends`).
+    krylov_nonsymmetric_min_dofs : the same for the non-symmetric systems of contact in finite
+        strain with trilinear elements, where the two paths' answers differ by more than
+        their tolerances once a grazing point or a held piece is decided differently
+        (chain2_steel at level 2: 2.8e-5 of the reaction vector) and the faceted rubber
+        chain's loose passes can fail on the Krylov path.
     krylov_order2_min_dofs : the same for triquadratic elements, whose 27-node couplings give
         about four times the nonzeros per unknown and factorizations that fill far more.
     krylov_floating_min_dofs : the further threshold, besides ``krylov_min_dofs``, of a system
@@ -143,7 +148,8 @@ class SolverPolicy:
     damping_max: float = 1e6
     rotation_stretch: float = 1.0
     onset_penetration: float = 0.1
-    krylov_min_dofs: int = 100_000
+    krylov_min_dofs: int = 20_000
+    krylov_nonsymmetric_min_dofs: int = 100_000
     krylov_order2_min_dofs: int = 20_000
     krylov_floating_min_dofs: int = 100_000
     krylov_saddle_min_dofs: int = 40_000

@@ -6,8 +6,10 @@
   large symmetric systems without contact, the reduced saddle solver of ``nurbs_fit``), set up
   once per matrix and kept while Newton passes the same matrix object (or, in modified
   Newton, while ``frozen``);
-- **krylov** (``linear: auto`` on a system of at least ``policy.krylov_min_dofs`` unknowns,
-  ``policy.krylov_order2_min_dofs`` with triquadratic elements,
+- **krylov** (``linear: auto`` on a symmetric system of at least ``policy.krylov_min_dofs``
+  unknowns, a non-symmetric one (contact in finite strain) of at least
+  ``policy.krylov_nonsymmetric_min_dofs``, ``policy.krylov_order2_min_dofs`` with
+  triquadratic elements,
   ``policy.krylov_floating_min_dofs`` with a body held by contact alone, a saddle point of at
   least ``policy.krylov_saddle_min_dofs``): CG or GMRES preconditioned by
   smoothed-aggregation AMG with the rigid-body modes (:mod:`cgfem.solve.krylov`); a saddle
@@ -48,17 +50,21 @@ AGAIN_RTOL = 1e-6
 
 
 def solve_path(backend: str, n: int, policy: SolverPolicy = DEFAULT_POLICY, saddle: bool = False,
-               floating: bool = False, order: int = 1) -> str:
+               floating: bool = False, order: int = 1, symmetric: bool = True) -> str:
     """:data:`KRYLOV` for ``auto`` on a ``saddle`` point (``nurbs_fit``'s, reduced to the
     bodies' dofs) of at least ``policy.krylov_saddle_min_dofs`` unknowns, on any other of at
-    least ``policy.krylov_min_dofs`` (elements of ``order`` 1) or
-    ``policy.krylov_order2_min_dofs`` (``order`` 2) and, with a body held by contact alone
-    (``floating``), of at least ``policy.krylov_floating_min_dofs`` too; else
-    :data:`DIRECT`."""
+    least ``policy.krylov_min_dofs`` (elements of ``order`` 1, ``symmetric``),
+    ``policy.krylov_nonsymmetric_min_dofs`` (``order`` 1, not ``symmetric``: contact in
+    finite strain) or ``policy.krylov_order2_min_dofs`` (``order`` 2) and, with a body held
+    by contact alone (``floating``), of at least ``policy.krylov_floating_min_dofs`` too;
+    else :data:`DIRECT`."""
     if saddle:
         least = policy.krylov_saddle_min_dofs
     else:
-        least = policy.krylov_min_dofs if order == 1 else policy.krylov_order2_min_dofs
+        if order != 1:
+            least = policy.krylov_order2_min_dofs
+        else:
+            least = policy.krylov_min_dofs if symmetric else policy.krylov_nonsymmetric_min_dofs
         least = max(least, policy.krylov_floating_min_dofs if floating else 0)
     return KRYLOV if backend == "auto" and n >= least else DIRECT
 
@@ -119,7 +125,8 @@ class LinearSolves:
         constraints are not given is factorized whole (:data:`DIRECT`)."""
         if self.indefinite and self.saddle is None:
             return DIRECT
-        return solve_path(self.backend, n, self.policy, self.indefinite, self.floating, self.order)
+        return solve_path(self.backend, n, self.policy, self.indefinite, self.floating, self.order,
+                          self.symmetric)
 
     def __call__(self, K: sp.csr_matrix | None, b: np.ndarray, rtol: float | None = None) -> np.ndarray:
         """The solution of ``K x = b``; ``rtol``: the relative residual an iterative solve may
