@@ -238,6 +238,7 @@ class FittedSurface(RaySurface):
             w = fit.surface.weights.reshape(-1, 1)
             parts.append(np.hstack([(fit.control_points + V) * w, w]).ravel())
         control = np.ascontiguousarray(np.concatenate(parts))
+        control.setflags(write=False)       # as the packed nets (:func:`pack_patches`): one compiled trace
         box = self._box
         return (control, self._origin, float(box), np.ones(3, np.int64), np.zeros(1, np.int64),
                 np.arange(8, dtype=np.int64)[None], np.zeros((8, 3)), RAY_TOL * self.h / box)

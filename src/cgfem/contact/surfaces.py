@@ -103,7 +103,7 @@ def pack_patches(surfaces: list[NurbsSurface]) -> tuple[np.ndarray, np.ndarray, 
     """NURBS patches as the flat arrays of :mod:`cgfem.contact._ray_kernels`: ``layout``
     (n_patches, 8) rows ``(p, q, n_u, n_v, knot offset, control offset, closed along u,
     closed along v)`` (:func:`closed_directions`), ``knots`` (each patch's ``knots_u`` then
-    ``knots_v``) and ``control`` (the homogeneous nets, raveled)."""
+    ``knots_v``) and ``control`` (the homogeneous nets, raveled), both read-only."""
     layout = np.zeros((len(surfaces), 8), np.int64)
     ko = co = 0
     for k, s in enumerate(surfaces):
@@ -113,6 +113,10 @@ def pack_patches(surfaces: list[NurbsSurface]) -> tuple[np.ndarray, np.ndarray, 
         co += s.control.size
     knots = np.concatenate([np.concatenate([s.knots_u, s.knots_v]) for s in surfaces])
     control = np.concatenate([s.control.ravel() for s in surfaces])
+    # read-only, as the patches' own arrays: the NURBS kernels the ray search shares with
+    # the geometry are then compiled once, not once per flag
+    knots.setflags(write=False)
+    control.setflags(write=False)
     return layout, knots, control
 
 

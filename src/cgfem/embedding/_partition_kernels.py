@@ -496,7 +496,7 @@ def partition_piece(pnet, origin, h, shape, origin2, h2, GX, GW, rule, max_depth
     p = pnet.shape[0] - 1
     q = pnet.shape[1] - 1
     # writable copies of both orientations (the given net may be read-only): one compiled
-    # version of _integrate_cell serves both
+    # version of _integrate_cell and of _emit_cell's callees serves both
     pnW = pnet.copy()
     pnT = np.ascontiguousarray(pnet.transpose(1, 0, 2))
     cap = 2 * max_depth + 8
@@ -545,7 +545,7 @@ def partition_piece(pnet, origin, h, shape, origin2, h2, GX, GW, rule, max_depth
                 continue
             nf, too_many = _cutting_planes(cnet, lo, hi, og, hg, g == 1, origin, h, touch, fk, fc, fplane, nf)
         if nf == 0 and not too_many:
-            _emit_cell(pnet, sa, sb, ta, tb, origin, h, shape, GX, GW, rule,
+            _emit_cell(pnW, sa, sb, ta, tb, origin, h, shape, GX, GW, rule,
                        out_st, out_x, out_w, out_n, out_e, counts)
             continue
         if not too_many:
@@ -562,7 +562,7 @@ def partition_piece(pnet, origin, h, shape, origin2, h2, GX, GW, rule, max_depth
                 continue
         if d >= max_depth:
             counts[2] += 1
-            _emit_cell(pnet, sa, sb, ta, tb, origin, h, shape, GX, GW, rule,
+            _emit_cell(pnW, sa, sb, ta, tb, origin, h, shape, GX, GW, rule,
                        out_st, out_x, out_w, out_n, out_e, counts)
             continue
         # split the cell along its longer side (measured on the control net)

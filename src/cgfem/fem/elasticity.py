@@ -113,7 +113,9 @@ def reference_matrix(A: np.ndarray, h: float, element: Hexahedron = HEX8) -> np.
     w = w * (0.5 * h) ** 3
     nd = element.n_dofs
     offsets = np.array([0, xi.shape[0]], np.int64)
-    scatter = np.arange(nd * nd, dtype=np.int64).reshape(1, nd * nd)
+    # int32 as the bodies' scatter maps (:func:`cgfem.fem.assembly.build_pattern`): one compiled
+    # version of the kernel serves both
+    scatter = np.arange(nd * nd, dtype=np.int32).reshape(1, nd * nd)
     data = np.zeros(nd * nd)
     kern.integrate_tangent(element.node_ijk, element.order, A[None], -1, xi, w, offsets, h,
                            np.array([0], np.int64), scatter, data)
