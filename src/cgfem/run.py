@@ -142,10 +142,8 @@ def estimate_memory(case: Case, level: int, measures: dict[str, BoundaryMeasures
         total += ORDER_MEMORY[order] * (BYTES_PER_ELEMENT * inside + BYTES_PER_CUT_ELEMENT * cut)
         dofs += int(3 * order**3 * (inside + cut))
     fitted = surface_definition(surface).fitted
-    # contact in finite strain gives non-symmetric tangents (:attr:`System.symmetric`)
-    symmetric = not (case.contact and case.kinematics == "finite")
     krylov = solve_path(case.solver.linear, dofs, policy, fitted, case.held_by_contact_alone, order,
-                        symmetric) == KRYLOV
+                        case.symmetric) == KRYLOV
     if krylov:
         floating = case.held_by_contact_alone
         if fitted:

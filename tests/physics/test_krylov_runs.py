@@ -144,10 +144,10 @@ def test_krylov_path_solves_the_fitted_steel_chain_and_falls_back_when_stalled(t
 
 def test_a_body_held_by_contact_alone_keeps_the_direct_path_longer():
     """chain3's middle link has no displacement conditions: with ``krylov_min_dofs = 0`` (and
-    ``krylov_nonsymmetric_min_dofs``) its
-    Newton systems still take the direct path (below ``krylov_floating_min_dofs``), while
-    chain2_steel's take the Krylov path; the built system and the case file agree on which
-    is which."""
+    ``krylov_nonsymmetric_min_dofs``) its Newton systems still take the direct path (below
+    ``krylov_floating_min_dofs``), while chain2_steel's take the Krylov path; the built
+    system and the case file agree on which is which, and on whether its matrices are
+    symmetric (chain3 small strain, chain2_steel contact in finite strain)."""
     from cgfem.run import build_bodies, build_pairs
     from cgfem.solve.solves import DIRECT, KRYLOV, LinearSolves
     from cgfem.solve.system import System
@@ -158,6 +158,7 @@ def test_a_body_held_by_contact_alone_keeps_the_direct_path_longer():
         models, _, solids = build_bodies(case, 0, "nurbs_fe", lambda message: None)
         system = System(models, build_pairs(case, models, solids, "nurbs_fe", lambda message: None), policy)
         assert system.held_by_contact_alone() == case.held_by_contact_alone == floating
+        assert system.symmetric == case.symmetric == (case.kinematics == "small")
         assert LinearSolves.of(system, "auto").path(system.n_dofs) == (DIRECT if floating else KRYLOV)
 
 

@@ -334,6 +334,13 @@ class Case:
         return bool(self.contact) and any(b.name not in supported for b in self.bodies)
 
     @property
+    def symmetric(self) -> bool:
+        """Whether the Newton matrices are symmetric: not with contact in finite strain (the
+        current-area weight), as :attr:`cgfem.solve.system.System.symmetric` decides on the
+        built pairs."""
+        return not (self.contact and self.kinematics == "finite")
+
+    @property
     def body_names(self) -> tuple[str, ...]:
         """Names of the bodies, in file order."""
         return tuple(b.name for b in self.bodies)

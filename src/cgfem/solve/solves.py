@@ -60,12 +60,14 @@ def solve_path(backend: str, n: int, policy: SolverPolicy = DEFAULT_POLICY, sadd
     else :data:`DIRECT`."""
     if saddle:
         least = policy.krylov_saddle_min_dofs
+    elif order != 1:
+        least = policy.krylov_order2_min_dofs
+    elif symmetric:
+        least = policy.krylov_min_dofs
     else:
-        if order != 1:
-            least = policy.krylov_order2_min_dofs
-        else:
-            least = policy.krylov_min_dofs if symmetric else policy.krylov_nonsymmetric_min_dofs
-        least = max(least, policy.krylov_floating_min_dofs if floating else 0)
+        least = policy.krylov_nonsymmetric_min_dofs
+    if floating and not saddle:
+        least = max(least, policy.krylov_floating_min_dofs)
     return KRYLOV if backend == "auto" and n >= least else DIRECT
 
 
