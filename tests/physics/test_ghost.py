@@ -128,6 +128,30 @@ def test_face_pairs_touch_cut_elements_only():
     assert np.array_equal(step, np.eye(3, dtype=int)[axes])
 
 
+@pytest.mark.parametrize("order", [1, 2])
+def test_the_pattern_is_the_elements_and_the_ghost_couplings(order):
+    """The body's sparsity pattern holds every entry of the ghost-penalty matrix, and nothing
+    beyond the elements' couplings and the node pairs across the penalized faces."""
+    model, _ = _stiffness(1e-1, 0.05, order)
+    space, pattern, G = model.space, model.pattern, model.ghost
+    K = pattern.matrix(np.ones(pattern.indices.size)).tocoo()
+    have = set(zip(K.row.tolist(), K.col.tolist()))
+    G = G.tocoo()
+    assert set(zip(G.row.tolist(), G.col.tolist())) <= have
+    nodes = [set() for _ in range(space.n_nodes)]
+    for element in space.connectivity:
+        for a in element:
+            nodes[a].update(element.tolist())
+    pairs, _ = face_pairs(space)
+    for lower, upper in pairs:
+        both = np.concatenate([space.connectivity[lower], space.connectivity[upper]]).tolist()
+        for a in both:
+            nodes[a].update(both)
+    expected = {(3 * a + i, 3 * b + k) for a in range(space.n_nodes) for b in nodes[a]
+                for i in range(3) for k in range(3)}
+    assert have == expected
+
+
 def _torus_stiffness(offset, order: int, h0: float):
     """A rotated torus clamped weakly on its whole surface, elements of ``order``: the
     stabilized stiffness with its Dirichlet penalty, and the smallest material fraction of

@@ -98,6 +98,12 @@ def test_a_floating_bodys_shift_is_scipys_sum_array_for_array():
     assert np.array_equal(K.toarray() + np.diag(floating._scale * d), shifted.toarray())
     # the input is left as it was, and a missing diagonal entry falls back to scipy's sum
     assert np.array_equal(K.data, before.data)
+    # overwriting: the same arrays, in the input's own memory
+    own = K.copy()
+    overwritten = floating.shifted(own, 1.0, 1.0, overwrite=True)
+    assert overwritten.data is own.data
+    for name in ("indptr", "indices", "data"):
+        assert np.array_equal(getattr(overwritten, name), getattr(expected, name)), name
     holed = K.tolil()
     holed[20, 20] = 0.0
     holed = holed.tocsr()

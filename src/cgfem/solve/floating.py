@@ -180,12 +180,15 @@ class FloatingBodies:
             self.bodies = [i for i, n in self.free_modes.items() if n]
         return self.bodies
 
-    def shifted(self, K: sp.csr_matrix, t: float, norm: float) -> sp.csr_matrix:
+    def shifted(self, K: sp.csr_matrix, t: float, norm: float, overwrite: bool = False) -> sp.csr_matrix:
         """``K`` plus the floating bodies' shift: ``floating_shift`` times the diagonal of the
         first tangent, times ``damping`` and the fading factor ``norm`` over the largest
         residual norm seen at load factor ``t`` (kept in ``[shift_floor, 1]``). ``K`` itself
         when no body floats. The fading lets Newton converge fast on a soft rigid mode of
-        stiffness ``k``, corrected at the rate ``shift / (k + shift)`` per iteration."""
+        stiffness ``k``, corrected at the rate ``shift / (k + shift)`` per iteration.
+        ``overwrite``: ``K`` is the caller's to change; where it holds the diagonal entry of
+        every shifted row the shift is added to its values in place (the same numbers, without
+        a copy of them: 0.4 s a tangent at half a million unknowns)."""
         if not self.bodies:
             return K
         damping = self.damping      # a new increment's first tangent keeps the last damping
@@ -209,6 +212,9 @@ class FloatingBodies:
         if at is None or np.any(at < 0):
             return K + sp.diags(shift, format="csr")
         # the sum scipy forms, without its pass over every entry
+        if overwrite:
+            K.data[at] += shift[rows]
+            return K
         data = K.data.copy()
         data[at] += shift[rows]
         return sp.csr_matrix((data, K.indices, K.indptr), shape=K.shape)

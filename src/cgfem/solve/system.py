@@ -167,8 +167,8 @@ class System:
             self._bodies_tangent = (at.copy(), K)
             self.floating.detect([p.K for p in parts])
         if couplings is not None:
-            K = add_couplings(K, couplings)
-            K = self.floating.shifted(K, t, float(np.linalg.norm(r)))
+            K = add_couplings(K, couplings)      # a new matrix: the shift may go into it
+            K = self.floating.shifted(K, t, float(np.linalg.norm(r)), overwrite=True)
         return r, K
 
     def continuous_residual(self, u: np.ndarray, t: float) -> tuple[np.ndarray, int]:
