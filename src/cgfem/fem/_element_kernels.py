@@ -212,8 +212,11 @@ def integrate_force(ijk, order, connectivity, P, xi, w, offsets, h, r):
 def integrate_tangent(ijk, order, A, first, xi, w, offsets, h, elements, scatter, data):
     """``K[3a+i, 3b+k] += sum_p w_p dN_a/dX_J A[p, i, J, k, L] dN_b/dX_L`` over the listed
     elements (``A[p - first]`` at point ``p``; ``A[0]`` everywhere if ``first < 0``),
-    accumulated into CSR ``data``. The elements run in parallel, so the listed ones must share
-    no node (one colour of :func:`cgfem.fem.assembly.colours`)."""
+    accumulated into CSR ``data``. ``A`` must have the major symmetry
+    ``A[i, J, k, L] = A[k, L, i, J]`` of a hyperelastic tangent: the upper triangle of each
+    element matrix is integrated and mirrored (the element matrices are symmetric bit for
+    bit). The elements run in parallel, so the listed ones must share no node (one colour of
+    :func:`cgfem.fem.assembly.colours`)."""
     m = ijk.shape[0]
     nd = 3 * m
     for q in prange(elements.size):
@@ -235,10 +238,16 @@ def integrate_tangent(ijk, order, A, first, xi, w, offsets, h, elements, scatter
             for a in range(m):
                 for i in range(3):
                     row = 3 * a + i
-                    for b in range(m):
+                    for k in range(i, 3):       # b = a: the columns from the diagonal on
+                        ke[row, 3 * a + k] += (dN[a, 0] * T[i, 0, a, k] + dN[a, 1] * T[i, 1, a, k]
+                                               + dN[a, 2] * T[i, 2, a, k])
+                    for b in range(a + 1, m):
                         for k in range(3):
                             ke[row, 3 * b + k] += (dN[a, 0] * T[i, 0, b, k] + dN[a, 1] * T[i, 1, b, k]
                                                    + dN[a, 2] * T[i, 2, b, k])
+        for r in range(nd):
+            for c in range(r + 1, nd):
+                ke[c, r] = ke[r, c]
         for r in range(nd):
             for c in range(nd):
                 data[scatter[e, nd * r + c]] += ke[r, c]
