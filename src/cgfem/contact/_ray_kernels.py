@@ -27,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from cgfem._parallel import parallel_kernel
 from cgfem.fem._element_kernels import basis, element_table, locate
 from cgfem.geometry._nurbs_kernels import surface_derivs
 
@@ -166,7 +167,7 @@ def wrap(a, lo, hi):
     return lo + (a - lo) % (hi - lo)
 
 
-@njit(cache=True, parallel=True)
+@parallel_kernel
 def trace(x1, n1, start_piece, start_theta, start_slot, band, max_gap, ray_tol, max_iter, layout, knots,
           control, origin, h, shape, elements, tol, connectivity, u, found, piece, theta, g, slot, status,
           polish):

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from cgfem._parallel import parallel_kernel
 from cgfem.embedding import _cone_kernels as _cones
 from cgfem.embedding._face_kernels import face_key, line_intervals
 
@@ -418,7 +419,7 @@ def _column_rule(e_ijk, origin, h, shape, node_shape, element_ids, s_x, s_w, s_n
     return np.empty((0, 3)), np.empty(0)
 
 
-@njit(cache=True, parallel=True)
+@parallel_kernel
 def column_rules(element_ids, elements_ijk, origin, h, shape, node_shape, s_x, s_w, s_n, s_off,
                  t_key, t_x, t_w, t_n, l_start, l_off, l_coord, gx, gw, cone_tables, degree, rows,
                  out_x, out_w, out_count, out_status, out_full, out_moments):
@@ -479,7 +480,7 @@ def column_rules(element_ids, elements_ijk, origin, h, shape, node_shape, s_x, s
         out_status[q] = kind
 
 
-@njit(cache=True, parallel=True)
+@parallel_kernel
 def recombine_groups(x, w, centre, half, offsets, degree, out_w):
     """Caratheodory recombination of every group ``offsets[g]:offsets[g + 1]`` of points
     ``x`` (n, 3) with weights ``w`` (n,) -> ``out_w`` (n,): at most ``(degree + 1)^3``

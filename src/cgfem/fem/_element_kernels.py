@@ -16,6 +16,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from cgfem._parallel import parallel_kernel
+
 #: local coordinates (8, 3) of the trilinear element's nodes, in the grid's node order
 #: (:meth:`cgfem.embedding.grid.CartesianGrid.element_nodes`)
 NODE_XI = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
@@ -96,7 +98,7 @@ def basis_second(ijk, order, xi, h, N, dN, d2N):
         d2N[a, 1, 2] = d2N[a, 2, 1] = ss * l0 * d1 * d2
 
 
-@njit(cache=True, parallel=True)
+@parallel_kernel
 def basis_at(ijk, order, xi, h, second):
     """Shape functions ``N`` (n, n_nodes), physical gradients ``dN`` (n, n_nodes, 3) and, if
     ``second``, second derivatives ``d2N`` (n, n_nodes, 3, 3) (else (0, n_nodes, 3, 3)) at
@@ -160,7 +162,7 @@ def locate(x, origin, h, shape, elements, tol, slots, xi):
                         xi[p, 2] = (x[p, 2] - (origin[2] + (k + 0.5) * h)) / (0.5 * h)
 
 
-@njit(cache=True, parallel=True)
+@parallel_kernel
 def point_gradients(ijk, order, connectivity, u, xi, offsets, h):
     """Displacement gradient ``H[p, i, J] = du_i/dX_J`` (n, 3, 3) at every point."""
     n_el, m = offsets.size - 1, ijk.shape[0]
@@ -208,7 +210,7 @@ def integrate_force(ijk, order, connectivity, P, xi, w, offsets, h, r):
     _integrate_vector(ijk, order, connectivity, P, np.empty((0, 3)), xi, w, offsets, h, r)
 
 
-@njit(cache=True, parallel=True)
+@parallel_kernel
 def integrate_tangent(ijk, order, A, first, xi, w, offsets, h, elements, scatter, data):
     """``K[3a+i, 3b+k] += sum_p w_p dN_a/dX_J A[p, i, J, k, L] dN_b/dX_L`` over the listed
     elements (``A[p - first]`` at point ``p``; ``A[0]`` everywhere if ``first < 0``),
@@ -253,7 +255,7 @@ def integrate_tangent(ijk, order, A, first, xi, w, offsets, h, elements, scatter
                 data[scatter[e, nd * r + c]] += ke[r, c]
 
 
-@njit(cache=True, parallel=True)
+@parallel_kernel
 def scatter_reference(ke, elements, scatter, data):
     """Add one element matrix ``ke`` (nd, nd) for each listed element (of one colour)."""
     nd = ke.shape[0]
@@ -293,7 +295,7 @@ def integrate_load(ijk, order, connectivity, values, xi, w, offsets, h, r):
     _integrate_vector(ijk, order, connectivity, np.empty((0, 3, 3)), values, xi, w, offsets, h, r)
 
 
-@njit(cache=True, parallel=True)
+@parallel_kernel
 def point_values(ijk, order, connectivity, nodal, xi, offsets, h):
     """Values (n, k) at the points of a nodal field ``nodal`` (n_nodes, k)."""
     k = nodal.shape[1]

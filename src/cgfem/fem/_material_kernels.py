@@ -31,6 +31,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from cgfem._parallel import parallel_kernel
+
 LINEAR_ELASTIC = 0
 NEO_HOOKEAN = 1
 
@@ -210,7 +212,7 @@ def stress_batch(model, H, mu, lam):
     return W, P
 
 
-@njit(cache=True, parallel=True)
+@parallel_kernel
 def tangent_batch(model, H, mu, lam):
     """``W`` (n,), ``P`` (n, 3, 3) and ``A = dP/dH`` (n, 3, 3, 3, 3) at the gradients ``H``."""
     n = H.shape[0]

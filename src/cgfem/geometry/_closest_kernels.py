@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from cgfem._parallel import parallel_kernel
 from cgfem.geometry._bezier import (CHUNK, MAX_NEWTON, STACK, bezier_derivs, bezier_work, clamp01, dist2,
                                     leaf_net, leaf_normal)
 
@@ -252,7 +253,7 @@ def _closest_point(bvh, x, tie, i, out_leaf, out_st, out_point, out_dist, out_no
     out_dist[i] = best_d
 
 
-@njit(cache=True, parallel=True)
+@parallel_kernel
 def closest_points_kernel(bvh, points, tie, out_leaf, out_st, out_point, out_dist, out_normal):
     """Branch and bound over the BVH ``bvh`` (:class:`~cgfem.geometry.bvh.BvhArrays`) for
     every row of ``points`` (n, 3); results into ``out_leaf`` (n,), ``out_st`` (n, 2) local

@@ -14,6 +14,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
+from cgfem._parallel import parallel_kernel
 from cgfem.geometry._bezier import (CHUNK, MAX_NEWTON, STACK, BezierWork, bezier_derivs, bezier_work, clamp01,
                                     cross_into, dist2, leaf_net, norm3)
 
@@ -224,7 +225,7 @@ def _ray_slab(axis, slab, o, d, t_min, t_max):
     return max(a, t_min) <= min(b, t_max)
 
 
-@njit(cache=True, parallel=True)
+@parallel_kernel
 def ray_kernel(bvh, origins, directions, t_min, t_max, merge, out_t, out_leaf, out_st, out_count):
     """All roots of every ray ``origins[i] + t directions[i]`` (n, 3) with the leaves of
     ``bvh`` (:class:`~cgfem.geometry.bvh.BvhArrays`) into ``out_t``, ``out_leaf``,
