@@ -78,9 +78,9 @@ def face_matrix(axis: int, h: float, element: Hexahedron = HEX8) -> np.ndarray:
 
 
 def ghost_penalty(space: Space, gamma: float, modulus: float) -> tuple[sp.csr_matrix, np.ndarray]:
-    """The ghost-penalty matrix (n_dofs, n_dofs) and the node pairs (m, 2) it couples across
-    each face, one node of each element (for the sparsity pattern: pairs an element already
-    couples and repeats among them)."""
+    """The ghost-penalty matrix (n_dofs, n_dofs) and the node pairs (m, 2) it couples that no
+    element does (one node of each element of a face, both off the face; for the sparsity
+    pattern, repeats among them)."""
     pairs, axes = face_pairs(space)
     n = space.n_dofs
     if pairs.size == 0 or gamma == 0.0:
@@ -98,9 +98,18 @@ def ghost_penalty(space: Space, gamma: float, modulus: float) -> tuple[sp.csr_ma
                                 np.concatenate([cols + i for i in range(3)]))), shape=(n, n)).tocsr()
     G.sum_duplicates()
     G.eliminate_zeros()
-    # the pairs across each face (one node in each element): the pattern builder adds both
-    # directions and drops what the elements already couple and any repeats
-    m = space.connectivity.shape[1]
-    lower = np.repeat(nodes[:, :m], m, axis=1).ravel()
-    upper = np.tile(nodes[:, m:], (1, m)).ravel()
+    # the pairs across each face that no element couples: a node of the lower element off the
+    # face with one of the upper element off it (a node on the face is in both elements); the
+    # pattern builder adds both directions and drops repeats
+    element = space.element
+    lower, upper = [], []
+    for axis in range(3):
+        here = axes == axis
+        below = np.flatnonzero(element.node_ijk[:, axis] < element.order)
+        above = np.flatnonzero(element.node_ijk[:, axis] > 0)
+        a = space.connectivity[pairs[here, 0]][:, below]
+        b = space.connectivity[pairs[here, 1]][:, above]
+        lower.append(np.repeat(a, above.size, axis=1).ravel())
+        upper.append(np.tile(b, (1, below.size)).ravel())
+    lower, upper = np.concatenate(lower), np.concatenate(upper)
     return G, np.stack([lower, upper], axis=1)
