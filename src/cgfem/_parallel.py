@@ -1,10 +1,9 @@
 """Kernels parallel over numba's threads, with a serial twin for runs on one thread.
 
 Compiling a kernel with ``parallel=True`` costs numba its parfor passes and the gufunc it
-builds around the parallel loop: a cold ``cgfem warmup`` on one thread took 147 s with the
-package's parallel kernels compiled parallel and 104 s with them compiled serially
-(2026-11-29; docs/performance.md, "Compilation"). A run on one thread (every pipeline job
-runs with ``NUMBA_NUM_THREADS=1``) gains nothing from the parallel version.
+builds around the parallel loop, about half again the compile time of the same kernel
+compiled serially (docs/performance.md, "Compilation"), and a run on one thread (every
+pipeline job runs with ``NUMBA_NUM_THREADS=1``) gains nothing from the parallel version.
 :func:`parallel_kernel` therefore compiles a kernel two ways, each on its first call and
 cached on disk under its own name (the twin's qualified name ends in ``_serial``): a call
 runs the serial twin while numba runs one thread (:func:`numba.get_num_threads`), the

@@ -188,7 +188,7 @@ class FloatingBodies:
         stiffness ``k``, corrected at the rate ``shift / (k + shift)`` per iteration.
         ``overwrite``: ``K`` is the caller's to change; where it holds the diagonal entry of
         every shifted row the shift is added to its values in place (the same numbers, without
-        a copy of them: 0.4 s a tangent at half a million unknowns)."""
+        a copy of them)."""
         if not self.bodies:
             return K
         damping = self.damping      # a new increment's first tangent keeps the last damping
