@@ -101,14 +101,13 @@ def ghost_penalty(space: Space, gamma: float, modulus: float) -> tuple[sp.csr_ma
     # the pairs across each face that no element couples: a node of the lower element off the
     # face with one of the upper element off it (a node on the face is in both elements); the
     # pattern builder adds both directions and drops repeats
-    element = space.element
+    element, m = space.element, space.connectivity.shape[1]
     lower, upper = [], []
     for axis in range(3):
-        here = axes == axis
+        face = nodes[axes == axis]           # the lower element's nodes first, then the upper's
         below = np.flatnonzero(element.node_ijk[:, axis] < element.order)
         above = np.flatnonzero(element.node_ijk[:, axis] > 0)
-        a = space.connectivity[pairs[here, 0]][:, below]
-        b = space.connectivity[pairs[here, 1]][:, above]
+        a, b = face[:, below], face[:, m + above]
         lower.append(np.repeat(a, above.size, axis=1).ravel())
         upper.append(np.tile(b, (1, below.size)).ravel())
     lower, upper = np.concatenate(lower), np.concatenate(upper)
