@@ -226,7 +226,7 @@ def integrate_tangent(ijk, order, A, first, xi, w, offsets, h, elements, scatter
         N = np.empty(m)
         dN = np.empty((m, 3))
         ke = np.zeros((nd, nd))
-        T = np.empty((3, 3, m, 3))  # T[i, J, b, k] = A[i, J, k, L] dN_b/dX_L
+        T = np.empty((3, 3, nd))  # T[i, J, 3b + k] = w_p A[i, J, k, L] dN_b/dX_L
         for p in range(offsets[e], offsets[e + 1]):
             basis(ijk, order, xi[p], h, N, dN)
             ap = p - first if first >= 0 else 0
@@ -234,19 +234,16 @@ def integrate_tangent(ijk, order, A, first, xi, w, offsets, h, elements, scatter
                 for J in range(3):
                     for b in range(m):
                         for k in range(3):
-                            T[i, J, b, k] = w[p] * (A[ap, i, J, k, 0] * dN[b, 0]
-                                                    + A[ap, i, J, k, 1] * dN[b, 1]
-                                                    + A[ap, i, J, k, 2] * dN[b, 2])
+                            T[i, J, 3 * b + k] = w[p] * (A[ap, i, J, k, 0] * dN[b, 0]
+                                                         + A[ap, i, J, k, 1] * dN[b, 1]
+                                                         + A[ap, i, J, k, 2] * dN[b, 2])
+            # row 3a + i of the upper triangle: one contiguous run of columns (vectorized)
             for a in range(m):
+                d0, d1, d2 = dN[a, 0], dN[a, 1], dN[a, 2]
                 for i in range(3):
                     row = 3 * a + i
-                    for k in range(i, 3):       # b = a: the columns from the diagonal on
-                        ke[row, 3 * a + k] += (dN[a, 0] * T[i, 0, a, k] + dN[a, 1] * T[i, 1, a, k]
-                                               + dN[a, 2] * T[i, 2, a, k])
-                    for b in range(a + 1, m):
-                        for k in range(3):
-                            ke[row, 3 * b + k] += (dN[a, 0] * T[i, 0, b, k] + dN[a, 1] * T[i, 1, b, k]
-                                                   + dN[a, 2] * T[i, 2, b, k])
+                    for c in range(row, nd):
+                        ke[row, c] += d0 * T[i, 0, c] + d1 * T[i, 1, c] + d2 * T[i, 2, c]
         for r in range(nd):
             for c in range(r + 1, nd):
                 ke[c, r] = ke[r, c]
