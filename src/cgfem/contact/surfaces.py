@@ -551,10 +551,10 @@ class FacetSurface:
             return best
         centroid = verts.mean(axis=1)
         radius = np.linalg.norm(verts - centroid[:, None], axis=2).max()
-        pairs = cKDTree(centroid).query_ball_point(x1[todo], r=max_gap + radius)
-        rows = np.repeat(todo, [len(p) for p in pairs])
-        if rows.size:
-            tris = np.concatenate([np.asarray(p, np.int64) for p in pairs if len(p)])
+        # every (ray, triangle) pair within reach, as arrays (no per-ray lists)
+        near = cKDTree(x1[todo]).sparse_distance_matrix(cKDTree(centroid), max_gap + radius, output_type="ndarray")
+        if near.size:
+            rows, tris = todo[near["i"]], near["j"].astype(np.int64)
             self._take(best, cand, *self._hits(x1, n1, rows, tris, verts, FACET_TOL, max_gap), nearest=True)
         return best
 
