@@ -421,10 +421,9 @@ element of its space)."""
             tree = cKDTree(centre[small])
             rows = np.flatnonzero(tree.query(x1, distance_upper_bound=reach)[0] <= reach)
             for part in np.array_split(rows, max(1, -(-rows.size // 4096))):
-                boxes = tree.query_ball_point(x1[part], r=reach)
-                pt = np.repeat(part, [len(b) for b in boxes])
-                if pt.size:
-                    el = small[np.concatenate([np.asarray(b, np.int64) for b in boxes if len(b)])]
+                near = cKDTree(x1[part]).sparse_distance_matrix(tree, reach, output_type="ndarray")
+                if near.size:
+                    pt, el = part[near["i"]], small[near["j"]]
                     may[pt[_segment_meets_box(x1[pt], n1[pt], centre[el], half[el], length)]] = True
         for e in np.flatnonzero(big):
             rest = np.flatnonzero(~may)
