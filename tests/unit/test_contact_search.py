@@ -16,7 +16,7 @@ import pytest
 from cgfem.contact import _ray_kernels as rk
 from cgfem.contact.kinematics import state_of
 from cgfem.contact.surfaces import (CANDIDATES, MAX_RAY_NEWTON, RAY_TOL, SAMPLE_REACH, NurbsFeSurface,
-                                    RayHits, closed_directions, pack_patches)
+                                    RayHits, closed_directions, pack_patches, pairs_within, surface_tree)
 from cgfem.embedding.quadrature import embed, grid_for
 from cgfem.fem.space import LOCATE_TOL, Space
 from cgfem.geometry.builders import build_solid
@@ -286,3 +286,15 @@ def test_newton_wraps_across_a_seam(scene):
             assert r == 1
             np.testing.assert_allclose(out[:2], target, atol=1e-10)
             np.testing.assert_allclose(out[2], 0.01, atol=1e-12)
+
+
+def test_pairs_within_are_exactly_the_pairs_at_most_reach_apart():
+    rng = np.random.default_rng(3)
+    x, y = rng.uniform(0.0, 1.0, (300, 3)), rng.uniform(0.0, 1.0, (200, 3))
+    reach = 0.15
+    i, j = pairs_within(x, surface_tree(y), reach)
+    d = np.linalg.norm(x[:, None] - y[None], axis=2)
+    expected = set(zip(*np.nonzero(d <= reach)))
+    assert i.dtype == j.dtype == np.int64
+    assert len(i) == len(expected) > 300
+    assert set(zip(i.tolist(), j.tolist())) == expected

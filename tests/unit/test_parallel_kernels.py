@@ -3,6 +3,7 @@ the parallel kernel on more, and both give the same bits."""
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -28,7 +29,6 @@ print(json.dumps({"threads": numba.get_num_threads(), "used": used, "H": H.ravel
 
 
 def _probe(threads: int) -> dict:
-    import json
     env = dict(os.environ, NUMBA_NUM_THREADS=str(threads))
     proc = subprocess.run([sys.executable, "-c", PROBE], capture_output=True, text=True, env=env, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
@@ -42,7 +42,8 @@ def test_one_thread_runs_the_serial_twin_and_two_the_parallel_kernel_with_the_sa
     assert one["H"] == two["H"]
 
 
-def test_the_twins_are_cached_under_names_of_their_own():
+def test_the_twins_have_names_of_their_own():
+    # numba names a kernel's cache files by its qualified name: the twins do not share them
     kernel = kern.integrate_tangent
     assert kernel.serial.py_func.__qualname__ == "integrate_tangent_serial"
     assert kernel.parallel.py_func.__qualname__ == "integrate_tangent"

@@ -73,6 +73,15 @@ def surface_tree(points: np.ndarray) -> cKDTree:
     return cKDTree(points, leafsize=32, balanced_tree=False, compact_nodes=False)
 
 
+def pairs_within(x: np.ndarray, tree: cKDTree, reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """Every pair of a point ``x[i]`` (n, 3) and a point ``j`` of ``tree`` at most ``reach``
+    apart, as two index arrays (m,) ``(i, j)``, in no particular order (callers must not
+    depend on it): the dual-tree traversal of ``sparse_distance_matrix``, without a Python
+    list per point."""
+    found = surface_tree(x).sparse_distance_matrix(tree, reach, output_type="ndarray")
+    return found["i"].astype(np.int64), found["j"].astype(np.int64)
+
+
 def locate_points(space: Space, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Active element (n,) and local coordinates (n, 3) of surface points ``x`` (n, 3);
     every point of the boundary lies in a cut element, so none may be missing."""
@@ -421,9 +430,9 @@ element of its space)."""
             tree = cKDTree(centre[small])
             rows = np.flatnonzero(tree.query(x1, distance_upper_bound=reach)[0] <= reach)
             for part in np.array_split(rows, max(1, -(-rows.size // 4096))):
-                near = cKDTree(x1[part]).sparse_distance_matrix(tree, reach, output_type="ndarray")
-                if near.size:
-                    pt, el = part[near["i"]], small[near["j"]]
+                pt, el = pairs_within(x1[part], tree, reach)
+                if pt.size:
+                    pt, el = part[pt], small[el]
                     may[pt[_segment_meets_box(x1[pt], n1[pt], centre[el], half[el], length)]] = True
         for e in np.flatnonzero(big):
             rest = np.flatnonzero(~may)
@@ -550,11 +559,11 @@ class FacetSurface:
             return best
         centroid = verts.mean(axis=1)
         radius = np.linalg.norm(verts - centroid[:, None], axis=2).max()
-        # every (ray, triangle) pair within reach, as arrays (no per-ray lists)
-        near = cKDTree(x1[todo]).sparse_distance_matrix(cKDTree(centroid), max_gap + radius, output_type="ndarray")
-        if near.size:
-            rows, tris = todo[near["i"]], near["j"].astype(np.int64)
-            self._take(best, cand, *self._hits(x1, n1, rows, tris, verts, FACET_TOL, max_gap), nearest=True)
+        # the pairs' order does not matter: _take keeps per ray the nearest hit, ties to the
+        # lowest triangle id
+        rows, tris = pairs_within(x1[todo], surface_tree(centroid), max_gap + radius)
+        if rows.size:
+            self._take(best, cand, *self._hits(x1, n1, todo[rows], tris, verts, FACET_TOL, max_gap), nearest=True)
         return best
 
     def _hits(self, x1: np.ndarray, n1: np.ndarray, rows: np.ndarray, tris: np.ndarray, verts: np.ndarray,
