@@ -12,7 +12,7 @@ change from the lowest level to the next, and the planar error per level.
 
     python3 -m benchmarks.bench_offsets [--examples planar chain2_steel ...] [--levels 0 1]
         [--surfaces facets nurbs_fe nurbs_fit] [--count 10] [--sets K ...] [--seed 2026] [--jobs 2]
-        [--reference results/reference/planar.npz] [--json out.json]
+        [--reference results/reference/planar.npz] [--policy NAME=VALUE ...] [--json out.json]
     python3 -m benchmarks.bench_offsets --from-json L0.json L1.json   # summarize saved runs
 """
 
@@ -52,14 +52,16 @@ def offset_cases(example: str, count: int, seed: int) -> list[tuple[dict, dict]]
     return out
 
 
-def run_one(case: dict, level: int, surface: str, folder: Path, threads: int) -> dict:
-    """One ``cgfem run`` in its own process; the figures of its summary."""
+def run_one(case: dict, level: int, surface: str, folder: Path, threads: int, policy: list[str] = ()) -> dict:
+    """One ``cgfem run`` in its own process (``policy``: its ``--policy`` settings); the figures
+    of its summary."""
     case_file = folder / "case.yaml"
     case_file.write_text(yaml.safe_dump(case, sort_keys=False))
     env = dict(os.environ, **{k: str(threads) for k in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS",
                                                           "OPENBLAS_NUM_THREADS")})
     proc = subprocess.run([sys.executable, "-m", "cgfem", "run", str(case_file), "--level", str(level),
-                           "--surface", surface, "--out", str(folder / "out"), "--quiet"],
+                           "--surface", surface, "--out", str(folder / "out"), "--quiet",
+                           *(f"--policy={item}" for item in policy)],
                           capture_output=True, text=True, env=env)
     summary_file = folder / "out" / "summary.json"
     if proc.returncode == 2 or not summary_file.exists():
@@ -107,6 +109,8 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=2, help="runs at once (one thread each)")
     parser.add_argument("--reference", default=str(REPO / "results" / "reference" / "planar.npz"),
                         help="the planar reference (python3 -m cgfem.reference.planar --out FILE)")
+    parser.add_argument("--policy", action="append", default=[], metavar="NAME=VALUE",
+                        help="passed to every cgfem run (a solver constant changed; repeatable)")
     parser.add_argument("--json", help="write every run's figures to this file")
     parser.add_argument("--from-json", nargs="+", metavar="FILE",
                         help="run nothing: summarize the runs saved by earlier --json files together")
@@ -118,7 +122,7 @@ def main() -> None:
         summarize(rows, sorted({r["level"] for r in rows}))
         return
     print(f"seed {args.seed}, {args.count} offsets per body; cores {os.cpu_count()}, load "
-          f"{os.getloadavg()[0]:.2f}", flush=True)
+          f"{os.getloadavg()[0]:.2f}" + (f"; policy {' '.join(args.policy)}" if args.policy else ""), flush=True)
     jobs = []
     for example in args.examples:
         for k, (case, offsets) in enumerate(offset_cases(example, args.count, args.seed)):
@@ -135,7 +139,7 @@ def main() -> None:
             folder = Path(tmp) / f"{example}_{k}_L{level}_{surface}"
             folder.mkdir()
             row = {"example": example, "offset_set": k, "level": level, "surface": surface,
-                   **run_one(case, level, surface, folder, 1)}
+                   **run_one(case, level, surface, folder, 1, args.policy)}
             if example == "planar" and row["status"] == "converged" and Path(args.reference).exists():
                 row["energy_error"] = planar_error(case, row["folder"], args.reference)
             print(f"{example:>13} set {k:>2} L{level} {surface:>9}: {row['status']:>19} "

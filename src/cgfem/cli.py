@@ -7,8 +7,9 @@ every body in its grid of that level and prints the element counts and the volum
 of the quadrature of the surface definition ``S``. Exit codes: 0 success, 2 bad input (one
 line on stderr naming the offending field, no traceback).
 
-``cgfem run CASE.yaml --level L --surface S --out DIR [--order P]`` solves the case with
-hexahedra of order ``P`` (1, default, or 2) and writes
+``cgfem run CASE.yaml --level L --surface S --out DIR [--order P] [--policy NAME=VALUE ...]``
+solves the case with hexahedra of order ``P`` (1, default, or 2), the solver's tuning constants
+changed as ``--policy`` says (:func:`cgfem.solve.policy.policy_with`), and writes
 ``DIR/summary.json``, ``DIR/step_NNN.vtu`` and ``DIR/surface_NNN.vtu`` (:mod:`cgfem.run`),
 with a progress line per Newton iteration and per step on stderr. Exit codes: 0 converged
 (status ``converged``), 1 not converged (status ``failed``: Newton failed, the converged
@@ -165,7 +166,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from cgfem.run import INTERRUPTED, run_case
     from cgfem.solve.static import CONVERGED
 
+    from cgfem.solve.policy import policy_with
+
     case = load_case(args.case)
+    try:
+        policy = policy_with(args.policy)
+    except ValueError as err:
+        raise InputError("--policy", str(err)) from None
     start = time.perf_counter()
     received: list[int] = []
 
@@ -183,7 +190,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        status = run_case(case, args.level, args.surface, args.out, log, args.order,
+        status = run_case(case, args.level, args.surface, args.out, log, args.order, policy=policy,
                           memory_check=args.memory_check)
     finally:
         for sig, handler in previous.items():
@@ -243,6 +250,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--no-memory-check", dest="memory_check", action="store_false",
                      help="run a level whose memory estimate (an upper bound, up to about twice the "
                           "peak) exceeds this machine's memory")
+    run.add_argument("--policy", action="append", default=[], metavar="NAME=VALUE",
+                     help="set one of the solver's tuning constants (cgfem.solve.policy.SolverPolicy; "
+                          "repeat for more), for experiments; summary.json records the ones changed")
     run.set_defaults(func=_cmd_run)
     warmup = sub.add_parser("warmup", help="compile and cache the numba kernels (two small contact "
                             "problems, every surface definition) before a batch of runs")

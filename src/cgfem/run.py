@@ -39,7 +39,7 @@ from cgfem.geometry.measure import BoundaryMeasures, boundary_measures
 from cgfem.results import clear_previous, write_json_atomic, write_step
 from cgfem.solve.linear import available_backends, mkl_threads
 from cgfem.solve.static import StepRecord, solve_static
-from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
+from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy, changed
 from cgfem.solve.solves import KRYLOV, solve_path
 from cgfem.solve.system import System
 
@@ -413,7 +413,7 @@ def run_case(case: Case, level: int, surface: str, out: Path,
             "case": case.name, "level": level, "surface": surface, "order": order, "status": status,
             "message": message, "kinematics": case.kinematics, "bodies": measures, "steps": steps,
             "timings": {"build_s": built - started, "solve_s": time.perf_counter() - built},
-            "threads": thread_settings(),
+            "threads": thread_settings(), "policy": changed(policy),
             "versions": {"cgfem": __version__, "python": platform.python_version(), "numpy": np.__version__}})
 
     try:

@@ -114,6 +114,35 @@ def test_floating_body_is_reported_with_a_vanishing_stabilizing_force(tmp_path):
     assert floating["lower"]["residual"] <= 1e-8 * np.linalg.norm(contact["force"])
 
 
+
+def test_energy_line_search_reaches_the_same_equilibrium(tmp_path, monkeypatch):
+    """``floating_search = "energy"`` (the option, not the default): the lower block floats, so
+    Newton's steps are searched along for the energy's minimum (counted here), and the run
+    ends where the residual's search ends it, the contact force the tractions' resultant; the
+    default never calls that search."""
+    import dataclasses
+
+    import cgfem.solve.newton as newton_module
+    from cgfem.solve.policy import DEFAULT_POLICY
+    calls = []
+    original = newton_module.energy_minimum
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return original(*args, **kwargs)
+    monkeypatch.setattr(newton_module, "energy_minimum", counted)
+    case = load_case(CASE)
+    forces = {}
+    for search in ("residual", "energy"):
+        calls.clear()
+        policy = dataclasses.replace(DEFAULT_POLICY, floating_search=search)
+        out = tmp_path / search
+        assert run_case(case, 0, "nurbs_fe", out, policy=policy).status == "converged"
+        forces[search] = np.asarray(json.loads((out / "summary.json").read_text())["steps"][-1]["contact"]["force"])
+        assert (len(calls) > 0) == (search == "energy")
+    assert abs(forces["energy"][2] + RESULTANT) <= 1e-8 * RESULTANT
+    assert np.allclose(forces["energy"], forces["residual"], rtol=0.0, atol=1e-8 * RESULTANT)
+
 # -- triquadratic hexahedra ------------------------------------------------------------------
 
 def run_order_2(level: int, surface: str, out) -> dict | None:

@@ -86,6 +86,7 @@ def test_run_writes_summary_and_steps(tmp_path, capsys):
     assert summary["status"] == "converged"
     assert all(s["outer_converged"] and s["outer_changes"][-1] <= 1e-6 for s in summary["steps"])
     assert (summary["case"], summary["level"], summary["surface"]) == ("link_pull", 0, "nurbs_fe")
+    assert summary["policy"] == {}                   # the solver's default constants
     body = summary["bodies"]["link"]
     assert body["dofs"] == 3 * body["nodes"]
     assert abs(body["volume"] / body["brep_volume"] - 1) < 1e-8
@@ -129,6 +130,9 @@ def test_run_that_fails_keeps_converged_steps_and_exits_1(tmp_path, capsys):
 @pytest.mark.parametrize("args, field", [
     (["--level", "-1"], "--level"),
     (["--level", "40"], "--level"),          # refused by the memory estimate, before any grid
+    (["--level", "0", "--policy", "floating_turn=fast"], "--policy"),
+    (["--level", "0", "--policy", "no_such_constant=1"], "--policy"),
+    (["--level", "0", "--policy", "forcing=-1"], "--policy"),
 ])
 def test_run_bad_input_exits_2_with_one_line(tmp_path, capsys, args, field):
     out = tmp_path / "out"

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cgfem.solve.newton import NONMONOTONE, newton, observed_order, window_orders
+from cgfem.solve.newton import (NONMONOTONE, SLOPE_RTOL, energy_minimum, newton, observed_order, slope_zero,
+                                window_orders)
 
 
 def _scalar(r, dr):
@@ -182,3 +183,82 @@ def test_a_solve_that_converges_after_a_slow_stretch_is_not_stopped():
     res = newton(assemble, np.array([1.0]), solve, tol=1e-9, reference=1.0, max_iter=30,
                  stagnation=(10, 0.5))
     assert res.converged and res.reason == "converged"
+
+
+def _kinked(soft: float, stiff: float, force: float):
+    """A body held by contact alone, in one unknown: a rigid motion of stiffness ``soft``
+    pushed by ``force`` onto a penalty spring ``stiff`` that engages at x = 1 (the residual is
+    the gradient of the convex energy ``soft x^2 / 2 + stiff <x - 1>^2 / 2 - force x``).
+    Returns the assemble function and the root."""
+    def assemble(u, tangent):
+        x = u[0]
+        r = np.array([soft * x + stiff * max(x - 1.0, 0.0) - force])
+        return r, (np.array([[soft + (stiff if x > 1.0 else 0.0)]]) if tangent else None)
+    return assemble, (force + stiff) / (soft + stiff)
+
+
+def test_energy_line_search_stops_a_soft_motion_at_its_contact():
+    """From x = 0, where the spring is off, Newton's step on the soft stiffness goes to
+    x = force / soft = 5e5, far past the spring's kink: every fraction of it down to 1/64
+    raises the residual, and the residual's line search gives up. The energy's slope along
+    the step is continuous and increasing through the kink; the step stops at its zero, on
+    the spring, and Newton converges there."""
+    assemble, root = _kinked(soft=1e-6, stiff=1.0, force=0.5)
+    residual = newton(assemble, np.array([0.0]), _solve, tol=1e-12, reference=1.0, max_iter=20)
+    assert not residual.converged and residual.reason == "line_search"
+    energy = newton(assemble, np.array([0.0]), _solve, tol=1e-12, reference=1.0, max_iter=20,
+                    energy_line_search=lambda: True)
+    assert energy.converged and energy.u[0] == pytest.approx(root, rel=1e-12)
+    assert len(energy.residuals) <= 4
+
+
+def test_energy_minimum_is_the_zero_of_the_slope_along_the_step():
+    """Along a step across two kinks of a convex energy in two unknowns the point returned has
+    a slope within SLOPE_RTOL of the first, and lies within that of the exact minimum along
+    the line (the slope is piecewise linear there: the minimum is found by bisection on a
+    fine sampling); a step that does not descend gets None, and one whose end still
+    descends is taken whole."""
+    A = np.array([[2.0, 0.5], [0.5, 1e-3]])
+    f = np.array([1.0, 0.2])
+
+    def assemble(u, tangent):
+        r = A @ u + 50.0 * np.maximum(u - 0.3, 0.0) - f
+        return r, (A if tangent else None)
+    u = np.zeros(2)
+    r, K = assemble(u, True)
+    du = np.linalg.solve(K, -r)
+    slope = lambda a: float(du @ assemble(u + a * du, False)[0])    # noqa: E731
+    assert slope(1.0) > 0.0                   # the step overshoots the kinks
+    x, r_x, n_x, K_x, a = energy_minimum(assemble, u, du, r, True)
+    assert 0.0 < a < 1.0 and K_x is None
+    assert abs(float(du @ r_x)) <= SLOPE_RTOL * abs(float(du @ r))
+    assert np.allclose(x, u + a * du) and n_x == pytest.approx(np.linalg.norm(r_x))
+    lo, hi = 0.0, 1.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if slope(mid) < 0.0 else (lo, mid)
+    # the slope rises by at least |slope(0)| over [0, a*] (it is increasing and linear in
+    # pieces): within SLOPE_RTOL |slope(0)| of zero is within SLOPE_RTOL of a* in the fraction
+    assert abs(a - lo) <= SLOPE_RTOL * lo
+    assert energy_minimum(assemble, u, -du, r, True) is None
+    short = energy_minimum(assemble, u, 1e-3 * du, r, True)
+    assert short is not None and short[4] == 1.0 and short[3] is not None
+
+
+def test_slope_zero_does_not_creep_or_overshoot_on_a_flat_then_steep_slope():
+    """A soft motion (slope 1e-6 per unit step) meeting a spring 1e15 times stiffer at 0.6 of
+    the step: regula falsi from the steep end creeps (each guess a hair past the flat side's
+    last); with the bisections the bracket closes on the kink, and what is returned, the
+    tolerance being out of reach, is the last point before it, where the energy still falls."""
+    calls = []
+
+    def slope(a):
+        calls.append(a)
+        return -1.0 + 1e-6 * a + 1e9 * max(a - 0.6, 0.0)
+    a = slope_zero(slope, slope(0.0), slope(1.0))
+    assert slope(a) < 0.0 and 0.6 * 0.99 <= a <= 0.6          # within 1 % of the kink
+    assert len(calls) <= 2 + 12 + 1
+    # a slope with its zero in reach is met within the tolerance, in a few evaluations
+    calls.clear()
+    a = slope_zero(lambda x: slope(x) if x < 0.6 else -1.0 + 5.0 * (x - 0.6), -1.0, 1.0)
+    assert abs(-1.0 + 5.0 * (a - 0.6)) <= SLOPE_RTOL and len(calls) <= 8

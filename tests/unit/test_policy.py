@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
+from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy, changed, policy_with
 from cgfem.solve.static import StepControl, predict
 
 
@@ -24,6 +24,26 @@ def test_policy_is_frozen_and_its_infinite_onset_turns_the_limit_off():
     with pytest.raises(AttributeError):
         policy.forcing = 0.5
     assert policy.onset_penetration == math.inf and DEFAULT_POLICY.onset_penetration == 0.1
+
+
+def test_policy_settings_are_read_as_their_constants_types():
+    """``cgfem run --policy NAME=VALUE``: a float, an int (also written 1e5), a choice; the
+    summary records exactly what differs from the defaults."""
+    policy = policy_with(["floating_turn = 0.05", "krylov_min_dofs=1e5", "floating_search=energy"])
+    assert policy.floating_turn == 0.05 and policy.krylov_min_dofs == 100_000
+    assert isinstance(policy.krylov_min_dofs, int) and policy.floating_search == "energy"
+    assert changed(policy) == {"floating_turn": 0.05, "krylov_min_dofs": 100_000, "floating_search": "energy"}
+    assert changed(policy_with([])) == {} and policy_with([]) == DEFAULT_POLICY
+    assert policy_with(["floating_rotation=inf"]).floating_rotation == math.inf
+
+
+@pytest.mark.parametrize("setting, says", [("floating_turn", "name=value"), ("floating_turn=", "name=value"),
+                                           ("no_such=1", "no_such is not"), ("krylov_min_dofs=1.5", "int"),
+                                           ("forcing=x", "float"), ("forcing=-1", "forcing must be"),
+                                           ("floating_search=fast", "floating_search must be")])
+def test_policy_settings_that_mean_nothing_are_refused_by_name(setting, says):
+    with pytest.raises(ValueError, match=says):
+        policy_with([setting])
 
 
 def run_steps(steps: int, max_cutbacks: int, largest: float) -> tuple[list[float], bool]:

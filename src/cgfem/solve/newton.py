@@ -15,6 +15,23 @@ solution the monotone search would give up on. Non-monotone from the start loses
 level 1 (its middle link, held by contact alone, wanders off); monotone alone loses
 chain2_rubber at level 1 with facets.
 
+``energy_line_search``: where the residual is the gradient of an energy (small strain: the
+elastic energy plus the contact penalty's, the fit's multipliers aside) and the step ``du``
+descends it (``s(0) = du . r(u) < 0``), the step goes to the energy's least value along it,
+the zero of ``s(a) = du . r(u + a du)`` on ``(0, 1]`` (:func:`energy_minimum`), instead of
+the residual's Armijo search. A body held by contact alone has a rigid motion that only a
+few contact points resist, each through the kink of its penalty law: Newton's step from one
+side of a kink overshoots to the other, the residual's search accepts it since the residual
+fell, and the next step comes back (chain3's middle link rocking about the chain's axis as
+one point engages and lets go). Where the energy is convex along the step, ``s`` is
+continuous and increasing, kinks included, and its zero is where the rocking step should
+stop. Where ``s(0)
+>= 0`` the residual's search is used: for an exact solve ``s(0) = -du . K du``, so the
+(shifted) tangent curves the wrong way along the step (the contact's curvature terms on the
+floating body's soft motion; on chain3 at level 0, offset set 4, 188 of 472 steps with
+``nurbs_fit``). The policy's ``floating_search`` chooses it; not the default (measured in
+``docs/validation.md``).
+
 ``stagnation=(window, factor)``: Newton stops (reason ``stagnated``) once the smallest
 residual of its last ``window`` iterates is above ``factor`` times the smallest one before
 them: a solve that has not halved its residual in ten iterations (contact points switching,
@@ -38,6 +55,7 @@ is accurate enough to end its increment is the outer loop's call
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -48,6 +66,12 @@ ARMIJO = 1e-4
 MIN_STEP = 1.0 / 64.0
 #: accepted residuals the non-monotone line search compares against
 NONMONOTONE = 5
+#: the energy line search stops where the slope along the step is below this fraction of its
+#: first, or after this many residuals ...
+SLOPE_RTOL = 0.1
+SLOPE_EVALUATIONS = 12
+#: ... or when its bracket is narrower than this fraction of the step
+SLOPE_WIDTH = 1e-3
 
 
 @dataclass
@@ -72,7 +96,8 @@ def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0
            max_iter: int, log: Callable[[int, float, str], None] | None = None,
            fixed_tangent: bool = False, limit: Callable[[np.ndarray], np.ndarray] | None = None,
            forcing: float | None = None, forcing_max: float = 0.0, loose: float = 0.0,
-           stagnation: tuple[int, float] = (0, 0.0)) -> NewtonResult:
+           stagnation: tuple[int, float] = (0, 0.0),
+           energy_line_search: Callable[[], bool] | None = None) -> NewtonResult:
     """Solve ``r(u) = 0`` from ``u0`` until ``|r| <= tol * max(reference, |r(u0)|)``. With
     ``fixed_tangent`` no tangent is assembled (``solve`` gets None and must use a
     factorization it kept: modified Newton). ``limit(du)``: the Newton step shortened
@@ -80,7 +105,8 @@ def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0
     ``log(iteration, |r| / reference, note)``: ``note`` says how the step was shortened
     (line-search fraction, the limit's ratio of step norms), empty for a full step. ``forcing``:
     inexact Newton (module docstring), None for exact solves; ``forcing_max``, ``loose`` and
-    ``stagnation``: module docstring (0 turns them off)."""
+    ``stagnation``: module docstring (0 turns them off). ``energy_line_search()``: whether
+    this step searches for the energy's minimum along it (module docstring); None: never."""
     u = u0.copy()
     need = not fixed_tangent
     r, K = assemble(u, need)
@@ -114,8 +140,10 @@ def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0
         # largest of the last NONMONOTONE residuals (from the same trials, not assembled again)
         bound = max(result.residuals[-NONMONOTONE:])
         trial = fallback = None
+        if energy_line_search is not None and energy_line_search():
+            trial = energy_minimum(assemble, u, du, r, need)
         step = 1.0
-        while step >= MIN_STEP:
+        while trial is None and step >= MIN_STEP:
             candidate = u + step * du
             # the full step usually succeeds: assemble its tangent at once
             r_new, K_new = assemble(candidate, need and step == 1.0)
@@ -148,6 +176,69 @@ def newton(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u0
             result.reason = "max_iterations"
     result.u = u
     return result
+
+
+def energy_minimum(assemble: Callable[[np.ndarray, bool], tuple[np.ndarray, object]], u: np.ndarray,
+                   du: np.ndarray, r: np.ndarray, tangent: bool) -> tuple | None:
+    """The point of least energy along Newton's step ``du`` from ``u`` (residual ``r``, the
+    energy's gradient): the full step where the slope ``s(1) = du . r(u + du)`` is at most
+    ``SLOPE_RTOL |s(0)|``, otherwise the zero of ``s`` on ``(0, 1)`` (:func:`slope_zero`).
+    Returns ``(u + a du, r, |r|, K, a)`` (``K`` the tangent at the full step if ``tangent``,
+    else None) or None where ``du`` does not descend (``s(0) >= 0``) or a residual is not
+    finite."""
+    s0 = float(np.dot(du, r))
+    if not s0 < 0.0:
+        return None
+    r1, K1 = assemble(u + du, tangent)
+    n1 = float(np.linalg.norm(r1))
+    if not np.isfinite(n1):
+        return None
+    s1 = float(np.dot(du, r1))
+    if s1 <= SLOPE_RTOL * abs(s0):
+        return u + du, r1, n1, K1, 1.0
+    trials: dict[float, tuple] = {1.0: (u + du, r1, n1, K1, 1.0)}
+
+    def slope(a: float) -> float:
+        ra, _ = assemble(u + a * du, False)
+        trials[a] = (u + a * du, ra, float(np.linalg.norm(ra)), None, a)
+        return float(np.dot(du, ra)) if np.isfinite(trials[a][2]) else math.nan
+
+    a = slope_zero(slope, s0, s1)
+    return trials.get(a) if a is not None else None
+
+
+def slope_zero(slope: Callable[[float], float], s0: float, s1: float, rtol: float = SLOPE_RTOL,
+               evaluations: int = SLOPE_EVALUATIONS, width: float = SLOPE_WIDTH) -> float | None:
+    """Where the increasing function ``slope`` (``slope(0) = s0 < 0 < s1 = slope(1)``) is
+    zero, within ``rtol |s0|``: regula falsi with the Anderson-Bjoerck scaling of the end it
+    keeps, and a bisection after a guess that did not halve the bracket (a slope that is
+    flat and then steep, the soft rigid motion meeting a contact spring, would otherwise
+    creep along the flat side). Stops after ``evaluations`` calls or when the bracket is
+    narrower than ``width`` times its right end; then the last point where the slope was
+    still negative (the energy, convex, is below its start there and not past its minimum),
+    or the bracket's right end if there was none. None if ``slope`` returns NaN."""
+    a, sa, b, sb = 0.0, s0, 1.0, s1
+    bisect = False
+    for _ in range(evaluations):
+        c = 0.5 * (a + b) if bisect else b - sb * (b - a) / (sb - sa)
+        sc = slope(c)
+        if math.isnan(sc):
+            return None
+        if abs(sc) <= rtol * abs(s0):
+            return c
+        before = b - a
+        if sc < 0.0:
+            m = 1.0 - sc / sa
+            sb *= m if m > 0.0 else 0.5
+            a, sa = c, sc
+        else:
+            m = 1.0 - sc / sb
+            sa *= m if m > 0.0 else 0.5
+            b, sb = c, sc
+        bisect = b - a > 0.5 * before
+        if b - a <= width * b:
+            break
+    return a if a > 0.0 else b
 
 
 def stagnated(residuals: list[float], window: int, factor: float) -> bool:

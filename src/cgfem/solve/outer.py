@@ -267,6 +267,9 @@ def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray 
         def assemble(v, tangent):
             return system.assemble(v, t, tangent)
 
+        def floating() -> bool:
+            return bool(system.floating.bodies)
+
         def attempt(start: np.ndarray, fixed_tangent: bool, outer=outer) -> NewtonResult:
             solves.frozen = fixed_tangent
             tic = time.perf_counter()
@@ -284,6 +287,7 @@ def solve_increment(system, solves, u0: np.ndarray, recovered0: list[np.ndarray 
                               fixed_tangent=fixed_tangent, limit=limit, forcing=policy.forcing,
                               forcing_max=0.0 if solves.factorizes else policy.forcing_max, loose=stop_at,
                               stagnation=(policy.stagnation_window, policy.stagnation_factor),
+                              energy_line_search=floating if policy.floating_search == "energy" else None,
                               log=lambda k, r, note: log(f"t={t:.4g} pass {outer} newton {k}: |r|/ref={r:.3e}  "
                                                          f"({time.perf_counter() - tic:.2f} s"
                                                          f"{'; ' + note if note else ''})"))

@@ -13,7 +13,8 @@ instead of patching module globals.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from collections.abc import Sequence
+from dataclasses import dataclass, fields, replace
 
 
 @dataclass(frozen=True)
@@ -72,6 +73,12 @@ class SolverPolicy:
         and above (triquadratic): the trilinear examples converge without it, and on chain3 at level 1
         it moved ``nurbs_fe`` to another of the middle link's equilibria (0.57 % in the pulled
         reaction). ``floating_rotation = inf`` turns it off.
+    floating_search : Newton's line search while a body floats: ``"residual"`` (Armijo on the
+        residual norm, as without floating bodies) or ``"energy"`` (the step goes to the least
+        energy along it where it descends, :func:`~cgfem.solve.newton.energy_minimum`, so that
+        a floating body's soft rigid motion does not rock across a contact point's kink).
+        Measured on chain3 at ten grid offsets it converges a few more runs and loses others
+        (``docs/validation.md``, "The chains at random grid offsets"): not the default.
     damping_decay, damping_above, damping_max : the Levenberg-Marquardt damping of the shift: a
         step limited to a fraction ``f`` at ``|r|`` above ``damping_above`` of the increment's
         largest multiplies the shift of the next tangents by ``1 / f``; any other step by
@@ -141,6 +148,7 @@ class SolverPolicy:
     floating_step: float = 1.0
     floating_turn: float = 0.07
     floating_rotation: float = 0.05
+    floating_search: str = "residual"
     rotation_cut_below: float = 1e-3
     rotation_cut_min_order: int = 2
     damping_decay: float = 0.25
@@ -173,6 +181,34 @@ class SolverPolicy:
 
 
 #: the values of the policy's named choices
-CHOICES = {"acceleration": ("aitken", "anderson", "none"), "predictor": ("none", "secant")}
+CHOICES = {"acceleration": ("aitken", "anderson", "none"), "predictor": ("none", "secant"),
+           "floating_search": ("energy", "residual")}
 
 DEFAULT_POLICY = SolverPolicy()
+
+
+def policy_with(settings: Sequence[str], base: SolverPolicy = DEFAULT_POLICY) -> SolverPolicy:
+    """``base`` with the constants ``settings`` name, each ``"name=value"`` (the value read as
+    the constant's type: ``"floating_turn=0.05"``, ``"floating_search=energy"``). Raises
+    ValueError naming the setting that is not ``name=value``, not a constant, or out of range."""
+    types = {f.name: type(getattr(base, f.name)) for f in fields(base)}
+    changes: dict[str, object] = {}
+    for setting in settings:
+        name, sep, text = setting.partition("=")
+        name, text = name.strip(), text.strip()
+        if not sep or not text:
+            raise ValueError(f"{setting!r} is not name=value")
+        if name not in types:
+            raise ValueError(f"{name} is not one of the solver's constants ({', '.join(sorted(types))})")
+        kind = types[name]
+        try:
+            changes[name] = text if kind is str else kind(float(text)) if kind is int and float(text).is_integer() \
+                else kind(text)
+        except ValueError:
+            raise ValueError(f"{name} must be a {kind.__name__}, got {text!r}") from None
+    return replace(base, **changes)
+
+
+def changed(policy: SolverPolicy, base: SolverPolicy = DEFAULT_POLICY) -> dict[str, object]:
+    """The constants of ``policy`` that differ from ``base``'s, by name."""
+    return {f.name: getattr(policy, f.name) for f in fields(policy) if getattr(policy, f.name) != getattr(base, f.name)}
