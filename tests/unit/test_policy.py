@@ -38,8 +38,8 @@ def test_policy_settings_are_read_as_their_constants_types():
 
 
 @pytest.mark.parametrize("setting, says", [("floating_turn", "name=value"), ("floating_turn=", "name=value"),
-                                           ("no_such=1", "no_such is not"), ("krylov_min_dofs=1.5", "int"),
-                                           ("forcing=x", "float"), ("forcing=-1", "forcing must be"),
+                                           ("no_such=1", "no_such is not"), ("krylov_min_dofs=1.5", "an integer"),
+                                           ("forcing=x", "a number"), ("forcing=-1", "forcing must be"),
                                            ("floating_search=fast", "floating_search must be")])
 def test_policy_settings_that_mean_nothing_are_refused_by_name(setting, says):
     with pytest.raises(ValueError, match=says):

@@ -201,11 +201,21 @@ def policy_with(settings: Sequence[str], base: SolverPolicy = DEFAULT_POLICY) ->
         if name not in types:
             raise ValueError(f"{name} is not one of the solver's constants ({', '.join(sorted(types))})")
         kind = types[name]
+        if kind is str:
+            changes[name] = text
+            continue
         try:
-            changes[name] = text if kind is str else kind(float(text)) if kind is int and float(text).is_integer() \
-                else kind(text)
+            number = float(text)
         except ValueError:
-            raise ValueError(f"{name} must be a {kind.__name__}, got {text!r}") from None
+            number = math.nan
+        if kind is int:
+            if not number.is_integer():
+                raise ValueError(f"{name} must be an integer, got {text!r}")
+            changes[name] = int(number)
+        elif text.lower() != "nan" and math.isnan(number):
+            raise ValueError(f"{name} must be a number, got {text!r}")
+        else:
+            changes[name] = number
     return replace(base, **changes)
 
 
