@@ -25,8 +25,7 @@ side of a kink overshoots to the other, the residual's search accepts it since t
 fell, and the next step comes back (chain3's middle link rocking about the chain's axis as
 one point engages and lets go). Where the energy is convex along the step, ``s`` is
 continuous and increasing, kinks included, and its zero is where the rocking step should
-stop. Where ``s(0)
->= 0`` the residual's search is used: for an exact solve ``s(0) = -du . K du``, so the
+stop. Where ``s(0) >= 0`` the residual's search is used: for an exact solve ``s(0) = -du . K du``, so the
 (shifted) tangent curves the wrong way along the step (the contact's curvature terms on the
 floating body's rigid turn; on chain3 at level 0, offset set 4, about 40 % of the steps with
 ``nurbs_fit``). The policy's ``floating_search`` chooses it; not the default (measured in
