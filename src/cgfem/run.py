@@ -41,6 +41,7 @@ from cgfem.solve.linear import available_backends, mkl_threads
 from cgfem.solve.static import StepRecord, solve_static
 from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy, changed
 from cgfem.solve.solves import KRYLOV, solve_path
+from cgfem.solve.spin import SpinSpring
 from cgfem.solve.system import System
 
 #: bytes per inside and per cut trilinear element: pattern scatter map, quadrature, tangent
@@ -417,7 +418,8 @@ def run_case(case: Case, level: int, surface: str, out: Path,
             "versions": {"cgfem": __version__, "python": platform.python_version(), "numpy": np.__version__}})
 
     try:
-        system = System(models, build_pairs(case, models, solids, surface, log), policy)
+        system = System(models, build_pairs(case, models, solids, surface, log), policy,
+                        spin_springs(case, models))
         views = [BoundaryView.of(m, solids[m.name]) for m in models]
 
         def on_step(record: StepRecord) -> None:
@@ -466,14 +468,38 @@ def _floating_summary(system: System, record: StepRecord, unknowns: np.ndarray) 
     """Per body held by contact alone in some rigid motion: how many rigid motions its own
     conditions leave free, the stabilizing force (the norm of the force the tangent shift put
     into the increment's last Newton step, :attr:`~cgfem.solve.floating.FloatingBodies.stabilizing`; the
-    residual never carries it) and the norm of the force its equations leave unbalanced at the
-    converged state (N), to compare with the contact force."""
+    residual never carries it), the norm of the force its equations leave unbalanced at the
+    converged state (N), to compare with the contact force, and where its spin is held
+    (``hold_spin``, :class:`~cgfem.solve.spin.SpinSpring`) ``spin``: the axis, the spin
+    (rad), the spring's moment about the axis (N m) and its stiffness (N m/rad)."""
     system.freeze(record.frozen_stress)
     r = system.split(system.assemble(unknowns, record.load_factor, False)[0])
     floating = system.floating
-    return {system.bodies[i].name: {"free_modes": floating.free_modes.get(i, 0),
-                                    "stabilizing_force": floating.stabilizing.get(i, 0.0),
-                                    "residual": float(np.linalg.norm(r[i]))} for i in floating.bodies}
+    held = {spring.name: spring for spring in system.springs}
+    entries = {}
+    for i in floating.bodies:
+        name = system.bodies[i].name
+        entries[name] = {"free_modes": floating.free_modes.get(i, 0),
+                         "stabilizing_force": floating.stabilizing.get(i, 0.0),
+                         "residual": float(np.linalg.norm(r[i]))}
+        if name in held:
+            spring = held[name]
+            entries[name]["spin"] = {"axis": spring.axis.tolist(), "angle": spring.angle(unknowns),
+                                     "moment": spring.moment(unknowns), "stiffness": spring.stiffness}
+    return entries
+
+
+def spin_springs(case: Case, models: list) -> list[SpinSpring]:
+    """The springs of the bodies whose case entry holds their spin (``hold_spin``), on the
+    unknowns of :class:`~cgfem.solve.system.System` (the bodies' dofs stacked in order)."""
+    springs, start = [], 0
+    for model in models:
+        body = case.body(model.name)
+        if body.hold_spin is not None:
+            springs.append(SpinSpring(model.name, start, model.space.coordinates, body.hold_spin,
+                                      body.material.E, model.space.h))
+        start += model.n_dofs
+    return springs
 
 
 def _write_step(out: Path, system: System, record: StepRecord, number: int,

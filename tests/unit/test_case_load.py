@@ -272,6 +272,9 @@ MALFORMED = [
     ("inf component", "boundary.0.components.y", float("inf"), "boundary[0].components.y", "finite"),
     ("expression list", "boundary.0.components.y", [1], "boundary[0].components.y",
      "expected a number or an expression string"),
+    ("zero spin axis", "bodies.lower.hold_spin", [0, 0, 0], "bodies.lower.hold_spin", "not all 0"),
+    ("spin axis two items", "bodies.lower.hold_spin", [1, 0], "bodies.lower.hold_spin", "expected 3 items"),
+    ("spin axis string", "bodies.lower.hold_spin", ["x", 0, 0], "bodies.lower.hold_spin[0]", "expected a number"),
 ]
 
 

@@ -255,7 +255,8 @@ def _body(name: str, raw: Mapping[str, Any], base_dir: Path) -> Body:
     body_force = None
     if "body_force" in raw:
         body_force = as_vector_expression(raw["body_force"], f"{prefix}.body_force")
-    return _within(prefix, Body, name, geometry, material, grid, body_force)
+    hold_spin = _numbers(raw["hold_spin"], f"{prefix}.hold_spin") if "hold_spin" in raw else None
+    return _within(prefix, Body, name, geometry, material, grid, body_force, hold_spin)
 
 
 def _boundary(i: int, raw: Mapping[str, Any], names: tuple[str, ...]) -> BoundaryCondition:

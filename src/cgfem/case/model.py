@@ -130,20 +130,28 @@ class GridSpec:
 
 @dataclass(frozen=True)
 class Body:
-    """One deformable body: its geometry spec, material, grid and optional body force
-    (N/m^3, a vector field in ``x, y, z``)."""
+    """One deformable body: its geometry spec, material, grid, optional body force
+    (N/m^3, a vector field in ``x, y, z``) and optional ``hold_spin``, the axis (3,) of a spin
+    about its nodes' centroid held by a torsional spring (:mod:`cgfem.solve.spin`)."""
 
     name: str
     geometry: GeometrySpec
     material: Material
     grid: GridSpec
     body_force: VectorExpression | None = None
+    hold_spin: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not BODY_NAME.match(self.name):
             raise InputError("name", f"must match {BODY_NAME.pattern}, got {self.name!r}")
         if type(self.geometry) not in _BUILDER_NAMES:
             raise InputError("geometry", f"expected a geometry spec, got {self.geometry!r}")
+        if self.hold_spin is not None:
+            axis = tuple(float(a) for a in self.hold_spin)
+            if len(axis) != 3 or not all(math.isfinite(a) for a in axis) or not any(axis):
+                raise InputError("hold_spin", f"expected an axis of three finite numbers, not all 0, "
+                                              f"got {list(self.hold_spin)}")
+            object.__setattr__(self, "hold_spin", axis)
 
     @property
     def builder(self) -> str:

@@ -4,7 +4,7 @@ The unknowns are the bodies' dofs stacked in order (body ``i`` owns ``offsets[i]
 followed by the unknowns the contact set owns (``contact.n_extra``: the fitted surfaces and
 their constraint multipliers of ``nurbs_fit``, :mod:`cgfem.contact.fitted`). The residual and
 the tangent are sums over items (:mod:`cgfem.solve.items`): every body, every contact pair,
-the fit constraints. Two collaborators act on what Newton solves: the floating bodies'
+the fit constraints, the springs that hold bodies' spins (:mod:`cgfem.solve.spin`). Two collaborators act on what Newton solves: the floating bodies'
 tangent shift and step limit (:class:`~cgfem.solve.floating.FloatingBodies`) and the
 contact-onset limit (:class:`~cgfem.solve.onset.OnsetLimit`).
 """
@@ -22,6 +22,7 @@ from cgfem.solve.floating import STRETCH_FLOOR_H, FloatingBodies, rotation_stret
 from cgfem.solve.items import Block, BodyItem
 from cgfem.solve.linear import rigid_body_modes
 from cgfem.solve.onset import OnsetLimit
+from cgfem.solve.spin import SpinSpring
 from cgfem.solve._sparse_kernels import sum_csr
 from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy
 from cgfem.solve.saddle import FitConstraint
@@ -89,13 +90,16 @@ class System:
     pairs (:class:`~cgfem.contact.pair.ContactPair`) between them, by their index in
     ``bodies``; ``policy``: the solver's tuning (:class:`~cgfem.solve.policy.SolverPolicy`)."""
 
-    def __init__(self, bodies: list, pairs: list | None = None, policy: SolverPolicy = DEFAULT_POLICY):
+    def __init__(self, bodies: list, pairs: list | None = None, policy: SolverPolicy = DEFAULT_POLICY,
+                 springs: list[SpinSpring] | None = None):
         self.bodies = bodies
         self.policy = policy
         sizes = [b.n_dofs for b in bodies]
         self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         self.body_items = [BodyItem(b, a) for b, a in zip(bodies, self.offsets[:-1])]
         self.contact = ContactSet(list(pairs or []), self.offsets)
+        #: the springs holding bodies' spins (``bodies.<name>.hold_spin``)
+        self.springs = list(springs or [])
         #: the bodies held by contact alone, their tangent shift and step limit
         self.floating = FloatingBodies(self.offsets, [b.space.h for b in bodies],
                                        [b.space.coordinates for b in bodies], policy, self.order)
@@ -115,7 +119,7 @@ class System:
     @property
     def items(self) -> list:
         """Every item, in the order their residuals are summed: bodies, then contact."""
-        return self.body_items + (self.contact.items if self.contact else [])
+        return self.body_items + self.springs + (self.contact.items if self.contact else [])
 
     @property
     def linear(self) -> bool:
@@ -158,6 +162,7 @@ class System:
         r = np.zeros(self.n_dofs)
         parts = [item.add(u, t, r, tangent and not reuse) for item in self.body_items]
         couplings = self.contact.add(u, r, tangent) if self.contact else None
+        held = [spring.add(u, t, r, tangent) for spring in self.springs]
         if not tangent:
             return r, None
         if reuse:
@@ -166,6 +171,8 @@ class System:
             K = self._stack([p.K for p in parts if isinstance(p, Block)])
             self._bodies_tangent = (at.copy(), K)
             self.floating.detect([p.K for p in parts])
+        for spring in held:
+            K = add_couplings(K, spring)
         if couplings is not None:
             K = add_couplings(K, couplings)      # a new matrix: the shift may go into it
             K = self.floating.shifted(K, t, float(np.linalg.norm(r)), overwrite=True)
@@ -176,7 +183,7 @@ class System:
         element or triangle holding it (:meth:`~cgfem.contact.assembly.ContactSet.continuous`),
         and how many active hits lie on a kept piece's extension instead."""
         r = np.zeros(self.n_dofs)
-        for item in self.body_items:
+        for item in self.body_items + self.springs:
             item.add(u, t, r, False)
         return r, self.contact.continuous(u, r)
 
