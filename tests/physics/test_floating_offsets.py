@@ -39,8 +39,11 @@ SET_4 = {"link_a": [0.8879, 0.8915, 0.5114], "link_c": [0.517, 0.6212, 0.7795],
 SHIPPED = 18689.7
 
 
-def run_offset(tmp_path, policy: SolverPolicy, log=lambda message: None, offsets=OFFSETS):
+def run_offset(tmp_path, policy: SolverPolicy, log=lambda message: None, offsets=OFFSETS,
+               free_spin: bool = False):
     data = parse_yaml(CASE.read_text())
+    if free_spin:
+        del data["bodies"]["link_c"]["hold_spin"]
     for name, offset in offsets.items():
         data["bodies"][name]["grid"]["offset"] = offset
     status = run_case(parse_case(data, CASE.parent), 0, "nurbs_fe", tmp_path, log, policy=policy)
@@ -69,16 +72,18 @@ def test_middle_link_carries_the_pull_at_a_grid_offset(tmp_path):
 
 @pytest.mark.long
 def test_slack_chain_is_not_reported_converged(tmp_path):
-    """Without the turn limit Newton turns the middle link by 0.5 rad into a stress-free slack
+    """With the link's spin free (``hold_spin`` removed: held, the run converges) and without
+    the turn limit Newton turns the middle link by 0.5 rad into a stress-free slack
     state at half the load (1.5 mm of stretch between its contacts, 1e-15 m elastic, 2e-5 m
-    of gap); the check rejects it, and the run, cut back five times, fails (96 s). It keeps
-    only steps at up to 0.19 of the load, where the pull (94 um) has not yet closed the coarse
-    grid's contacts and the turn stretches the link by 1.5 um at most."""
+    of gap); the check rejected it, and the run, cut back five times, failed (96 s). Since
+    Newton's stagnation stop (2026-11-29) the attempts at full, half and quarter load stop
+    stalled before such a state is reached (2026-12-01: no state rejected, 53 s); either way the
+    run fails, keeping only steps at up to 0.19 of the load, where the pull (94 um) has not yet
+    closed the coarse grid's contacts. The state check itself: ``tests/physics/test_system.py``."""
     lines: list[str] = []
     status, summary = run_offset(tmp_path, dataclasses.replace(DEFAULT_POLICY, floating_turn=math.inf),
-                                 lines.append)
+                                 lines.append, free_spin=True)
     assert status.status == "failed"
-    assert any("state rejected: link_c turned" in line for line in lines)
     assert all(step["load_factor"] < 0.5 for step in summary["steps"])
 
 

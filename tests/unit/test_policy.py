@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import replace
 
@@ -34,6 +35,10 @@ def test_policy_settings_are_read_as_their_constants_types():
     assert isinstance(policy.krylov_min_dofs, int) and policy.floating_search == "energy"
     assert changed(policy) == {"floating_turn": 0.05, "krylov_min_dofs": 100_000, "floating_search": "energy"}
     assert changed(policy_with([])) == {} and policy_with([]) == DEFAULT_POLICY
+    # a limit turned off is recorded as JSON can hold it (summary.json)
+    off = changed(replace(DEFAULT_POLICY, floating_turn=math.inf))
+    assert off == {"floating_turn": "inf"}
+    json.dumps(off, allow_nan=False)
     assert policy_with(["floating_rotation=inf"]).floating_rotation == math.inf
 
 

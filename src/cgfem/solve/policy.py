@@ -222,5 +222,9 @@ def policy_with(settings: Sequence[str], base: SolverPolicy = DEFAULT_POLICY) ->
 
 
 def changed(policy: SolverPolicy, base: SolverPolicy = DEFAULT_POLICY) -> dict[str, object]:
-    """The constants of ``policy`` that differ from ``base``'s, by name."""
-    return {f.name: getattr(policy, f.name) for f in fields(policy) if getattr(policy, f.name) != getattr(base, f.name)}
+    """The constants of ``policy`` that differ from ``base``'s, by name, as JSON can hold
+    them: a float that is not finite (``inf`` turns a limit off) as its text, ``"inf"``."""
+    def value(v: object) -> object:
+        return repr(v) if isinstance(v, float) and not math.isfinite(v) else v
+    return {f.name: value(getattr(policy, f.name)) for f in fields(policy)
+            if getattr(policy, f.name) != getattr(base, f.name)}
