@@ -41,7 +41,6 @@ from cgfem.solve.linear import available_backends, mkl_threads
 from cgfem.solve.static import StepRecord, solve_static
 from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy, changed
 from cgfem.solve.solves import KRYLOV, solve_path
-from cgfem.solve.spin import SpinSpring
 from cgfem.solve.system import System
 
 #: bytes per inside and per cut trilinear element: pattern scatter map, quadrature, tangent
@@ -419,7 +418,7 @@ def run_case(case: Case, level: int, surface: str, out: Path,
 
     try:
         system = System(models, build_pairs(case, models, solids, surface, log), policy,
-                        spin_springs(case, models))
+                        {b.name: (b.hold_spin, b.material.E) for b in case.bodies if b.hold_spin is not None})
         views = [BoundaryView.of(m, solids[m.name]) for m in models]
 
         def on_step(record: StepRecord) -> None:
@@ -487,19 +486,6 @@ def _floating_summary(system: System, record: StepRecord, unknowns: np.ndarray) 
             entries[name]["spin"] = {"axis": spring.axis.tolist(), "angle": spring.angle(unknowns),
                                      "moment": spring.moment(unknowns), "stiffness": spring.stiffness}
     return entries
-
-
-def spin_springs(case: Case, models: list) -> list[SpinSpring]:
-    """The springs of the bodies whose case entry holds their spin (``hold_spin``), on the
-    unknowns of :class:`~cgfem.solve.system.System` (the bodies' dofs stacked in order)."""
-    springs, start = [], 0
-    for model in models:
-        body = case.body(model.name)
-        if body.hold_spin is not None:
-            springs.append(SpinSpring(model.name, start, model.space.coordinates, body.hold_spin,
-                                      body.material.E, model.space.h))
-        start += model.n_dofs
-    return springs
 
 
 def _write_step(out: Path, system: System, record: StepRecord, number: int,

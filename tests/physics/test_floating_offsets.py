@@ -102,5 +102,4 @@ def test_held_spin_converges_where_the_free_spin_failed(tmp_path):
     spin = step["contact"]["floating"]["link_c"]["spin"]
     assert spin["axis"] == [1.0, 0.0, 0.0]
     assert abs(spin["moment"]) <= 0.05 * pulled[1] * 0.015, spin
-    assert spin["moment"] == pytest.approx(spin["stiffness"] * spin["angle"], rel=1e-12)
     assert np.linalg.norm(pulled + clamped) <= 1e-6 * np.linalg.norm(pulled)

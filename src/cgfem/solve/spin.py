@@ -28,9 +28,9 @@ moment is what the discretization breaks of that symmetry (reported per step in 
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 
 from cgfem.solve.floating import rigid_fit_rows
+from cgfem.solve.items import Couplings
 
 #: the nodes the spin is measured on: one per sector of angle about the axis
 SPIN_NODES = 48
@@ -77,7 +77,8 @@ class SpinSpring:
     """The spring on the spin about ``axis`` (3,) of the body whose dofs are
     ``start:start + 3 n``, its nodes at ``coordinates`` (n, 3) (m), Young's modulus ``E``
     (Pa) and element size ``h`` (m) (module docstring). An item of the system
-    (:mod:`cgfem.solve.items`): :meth:`add` adds its residual and returns its tangent."""
+    (:mod:`cgfem.solve.items`): :meth:`add` adds its residual and returns its tangent's
+    entries (constant: built once)."""
 
     def __init__(self, name: str, start: int, coordinates: np.ndarray, axis, E: float, h: float):
         self.name = name
@@ -95,8 +96,8 @@ class SpinSpring:
         #: the spring's stiffness (N m/rad)
         self.stiffness = SPIN_STIFFNESS * float(E) * float(h) * float((perp ** 2).sum())
         m = self.dofs.size
-        self._rows, self._cols = np.repeat(self.dofs, m), np.tile(self.dofs, m)
-        self._values = self.stiffness * np.outer(self.g, self.g).ravel()
+        self._tangent = Couplings(np.repeat(self.dofs, m), np.tile(self.dofs, m),
+                                  self.stiffness * np.outer(self.g, self.g).ravel())
 
     def angle(self, u: np.ndarray) -> float:
         """The spin (rad) of the unknowns ``u``."""
@@ -106,10 +107,8 @@ class SpinSpring:
         """The spring's moment about the axis (N m) at the unknowns ``u``."""
         return self.stiffness * self.angle(u)
 
-    def add(self, u: np.ndarray, t: float, r: np.ndarray, tangent: bool) -> sp.coo_matrix | None:
-        """Add ``k theta g`` to the residual ``r`` (n,) (N) at ``u`` (n,); the tangent
-        ``k g g^T`` (n, n) (N/m) if ``tangent``. ``t`` is not used (the spring is not loaded)."""
+    def add(self, u: np.ndarray, t: float, r: np.ndarray, tangent: bool) -> Couplings | None:
+        """Add ``k theta g`` to the residual ``r`` (n,) (N) at ``u`` (n,); the tangent's entries
+        ``k g g^T`` (N/m) if ``tangent``. ``t`` is not used (the spring is not loaded)."""
         r[self.dofs] += self.moment(u) * self.g
-        if not tangent:
-            return None
-        return sp.coo_matrix((self._values, (self._rows, self._cols)), shape=(r.size, r.size))
+        return self._tangent if tangent else None

@@ -16,10 +16,10 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
-from cgfem.contact.assembly import ContactSet
+from cgfem.contact.assembly import ContactSet, couplings_matrix
 from cgfem.fem.assembly import index_type
 from cgfem.solve.floating import STRETCH_FLOOR_H, FloatingBodies, rotation_stretch
-from cgfem.solve.items import Block, BodyItem
+from cgfem.solve.items import Block, BodyItem, Couplings
 from cgfem.solve.linear import rigid_body_modes
 from cgfem.solve.onset import OnsetLimit
 from cgfem.solve.spin import SpinSpring
@@ -91,15 +91,18 @@ class System:
     ``bodies``; ``policy``: the solver's tuning (:class:`~cgfem.solve.policy.SolverPolicy`)."""
 
     def __init__(self, bodies: list, pairs: list | None = None, policy: SolverPolicy = DEFAULT_POLICY,
-                 springs: list[SpinSpring] | None = None):
+                 holds: dict[str, tuple[tuple[float, float, float], float]] | None = None):
         self.bodies = bodies
         self.policy = policy
         sizes = [b.n_dofs for b in bodies]
         self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         self.body_items = [BodyItem(b, a) for b, a in zip(bodies, self.offsets[:-1])]
         self.contact = ContactSet(list(pairs or []), self.offsets)
-        #: the springs holding bodies' spins (``bodies.<name>.hold_spin``)
-        self.springs = list(springs or [])
+        #: the springs holding bodies' spins: ``holds`` maps a body's name to its spin axis and
+        #: Young's modulus (Pa) (``bodies.<name>.hold_spin``, :mod:`cgfem.solve.spin`)
+        holds = holds or {}
+        self.springs = [SpinSpring(b.name, int(a), b.space.coordinates, *holds[b.name], b.space.h)
+                        for b, a in zip(bodies, self.offsets[:-1]) if b.name in holds]
         #: the bodies held by contact alone, their tangent shift and step limit
         self.floating = FloatingBodies(self.offsets, [b.space.h for b in bodies],
                                        [b.space.coordinates for b in bodies], policy, self.order)
@@ -171,8 +174,9 @@ class System:
             K = self._stack([p.K for p in parts if isinstance(p, Block)])
             self._bodies_tangent = (at.copy(), K)
             self.floating.detect([p.K for p in parts])
-        for spring in held:
-            K = add_couplings(K, spring)
+        if held:        # one merge into K with the contact's couplings
+            contact = [Couplings(couplings.row, couplings.col, couplings.data)] if couplings is not None else []
+            couplings = couplings_matrix(contact + held, self.n_dofs)
         if couplings is not None:
             K = add_couplings(K, couplings)      # a new matrix: the shift may go into it
             K = self.floating.shifted(K, t, float(np.linalg.norm(r)), overwrite=True)
