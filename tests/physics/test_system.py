@@ -261,7 +261,8 @@ def test_cut_rotation_minimizes_the_quadratic_model_at_the_cut_turn():
     rotation scaled to ``floating_rotation``: its rotation is that, and ``K du + r`` lies in
     the span of the rotation rows (the constraint's multipliers). A step within it is kept;
     so is every step far from a solution (residual above ``rotation_cut_below`` of the
-    increment's largest) and of elements below ``rotation_cut_min_order``. The body's own
+    increment's largest), of elements below ``rotation_cut_min_order`` and of a body whose spin
+    is held (``held``). The body's own
     stiffness with a weak spring on every dof stands in for the shifted tangent of a body
     held by contact alone (its rigid motions nearly free)."""
     from cgfem.solve.floating import rigid_fit_rows
@@ -279,9 +280,9 @@ def test_cut_rotation_minimizes_the_quadratic_model_at_the_cut_turn():
     assert np.linalg.norm(rows @ spin) == pytest.approx(np.linalg.norm([0.3, 0.2, 1.0]), rel=1e-12)
     assert np.linalg.norm(rows @ du0) > policy.floating_rotation
 
-    def floating_at(residual: float, order: int) -> FloatingBodies:
+    def floating_at(residual: float, order: int, held: frozenset[int] = frozenset()) -> FloatingBodies:
         """A floating body whose increment's largest residual is 1, at ``residual``."""
-        floating = FloatingBodies(np.array([0, body.n_dofs]), [body.space.h], [x], policy, order)
+        floating = FloatingBodies(np.array([0, body.n_dofs]), [body.space.h], [x], policy, order, held)
         floating.bodies = [0]
         floating.shifted(K, 1.0, 1.0)
         floating.shifted(K, 1.0, residual)
@@ -297,6 +298,8 @@ def test_cut_rotation_minimizes_the_quadratic_model_at_the_cut_turn():
     assert floating_at(near, 2).limit(small, factor.solve) is small
     assert floating_at(2.0 * policy.rotation_cut_below, 2).limit(du0, factor.solve) is du0
     assert floating_at(near, 1).limit(du0, factor.solve) is du0
+    # a body whose spin a spring holds (bodies.<name>.hold_spin) keeps its turns
+    assert floating_at(near, 2, frozenset({0})).limit(du0, factor.solve) is du0
 
 
 def test_rotation_stretch_of_a_turned_and_strained_body():

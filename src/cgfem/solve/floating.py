@@ -142,12 +142,14 @@ class FloatingBodies:
 
     ``offsets`` (n_bodies + 1,): body ``i`` owns unknowns ``offsets[i]:offsets[i+1]``;
     ``h`` (n_bodies,): element sizes (m); ``coordinates``: per body its nodes (n_i, 3) (m);
-    ``order``: the elements' (rotations are cut from ``policy.rotation_cut_min_order`` on).
-    Until :meth:`detect` has run, :attr:`bodies` is None.
+    ``order``: the elements' (rotations are cut from ``policy.rotation_cut_min_order`` on);
+    ``held``: indices of bodies whose spin a spring holds (:mod:`cgfem.solve.spin`), whose
+    rotation is never cut: the cut contains a free spin, and cutting the turns a held body
+    still makes stalls Newton. Until :meth:`detect` has run, :attr:`bodies` is None.
     """
 
     def __init__(self, offsets: np.ndarray, h: list[float], coordinates: list[np.ndarray],
-                 policy: SolverPolicy = DEFAULT_POLICY, order: int = 1):
+                 policy: SolverPolicy = DEFAULT_POLICY, order: int = 1, held: frozenset[int] = frozenset()):
         self.offsets = np.asarray(offsets, np.int64)
         self.h, self.coordinates, self.policy = list(h), coordinates, policy
         #: per body, the RMS distance of its nodes to their centroid (m)
@@ -171,6 +173,7 @@ class FloatingBodies:
         #: (:func:`rigid_fit_rows`, built on first use)
         self._cuts = order >= policy.rotation_cut_min_order and bool(np.isfinite(policy.floating_rotation))
         self._rows: dict[int, np.ndarray] = {}
+        self._held = frozenset(held)
 
     def detect(self, tangents: list[sp.spmatrix]) -> list[int]:
         """Find the floating bodies from each body's own first tangent (once)."""
@@ -223,7 +226,7 @@ class FloatingBodies:
         """The Newton step ``du``, first (elements of order ``rotation_cut_min_order`` or above,
         given ``solve``, a solve with the step's matrix, and with the residual below
         ``rotation_cut_below`` of the increment's largest) with each floating body's rotation
-        cut to ``floating_rotation`` by :func:`bound_rotation`, then
+        cut to ``floating_rotation`` by :func:`bound_rotation` (not those whose spin is held), then
         scaled down (all of it: the bodies' equations are coupled)
         so that no node of a floating body moves by more than ``floating_step`` of its
         element size, nor more than ``floating_turn`` times its radius (:attr:`radius`: a
@@ -234,6 +237,8 @@ class FloatingBodies:
         p = self.policy
         if self._cuts and solve is not None and self._fading < p.rotation_cut_below:
             for i in self.bodies or ():
+                if i in self._held:
+                    continue
                 if i not in self._rows:
                     self._rows[i] = rigid_fit_rows(self.coordinates[i])[3:]
                 cut = bound_rotation(du, self._rows[i], slice(self.offsets[i], self.offsets[i + 1]),

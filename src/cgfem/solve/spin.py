@@ -18,7 +18,7 @@ body, the node farthest from the axis in each of as many equal sectors of angle 
 in ``u``). A rigid spin gives ``theta`` exactly; a translation or a turn about a
 perpendicular axis gives 0. The stiffness ``k = SPIN_STIFFNESS E h sum |r_perp|^2`` (N m/rad)
 is that of a spring of ``SPIN_STIFFNESS`` times the grid's nodal stiffness ``E h`` on each of
-those nodes, ``r_perp`` its distance to the axis: hundreds of times the spin's spurious
+those nodes, ``r_perp`` its distance to the axis: over a hundred times the spin's spurious
 ``2 F a`` on chain3, and a hundredth of the bulk's entries, so that the spin can still give a
 little where the discrete contact forces push it. The spring's moment ``k theta`` is what holding the spin takes; on a
 surface of revolution about the axis the contact forces have no moment about it, so the
@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from cgfem.geometry.builders import orthonormal_frame
 from cgfem.solve.floating import rigid_fit_rows
 from cgfem.solve.items import Couplings
 
@@ -50,9 +51,7 @@ def spin_nodes(coordinates: np.ndarray, axis: np.ndarray, count: int = SPIN_NODE
     r = X - X.mean(axis=0)
     perp = r - np.outer(r @ a, a)
     distance = np.linalg.norm(perp, axis=1)
-    e1 = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(a, e1)
+    e1, e2, _ = orthonormal_frame(a)
     sector = np.floor((np.arctan2(perp @ e2, perp @ e1) + np.pi) / (2.0 * np.pi) * count).astype(np.int64)
     sector = np.minimum(sector, count - 1)
     far = distance > np.quantile(distance, SPIN_QUANTILE)

@@ -105,7 +105,8 @@ class System:
                         for b, a in zip(bodies, self.offsets[:-1]) if b.name in holds]
         #: the bodies held by contact alone, their tangent shift and step limit
         self.floating = FloatingBodies(self.offsets, [b.space.h for b in bodies],
-                                       [b.space.coordinates for b in bodies], policy, self.order)
+                                       [b.space.coordinates for b in bodies], policy, self.order,
+                                       held=frozenset(i for i, b in enumerate(bodies) if b.name in holds))
         if not self.contact:
             self.floating.bodies = []
         #: the contact-onset limit of a solve's first Newton step
