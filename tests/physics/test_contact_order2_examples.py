@@ -47,7 +47,13 @@ def test_two_link_chains_converge_and_balance(tmp_path, example, level, surface)
 #: chain3 with facets at level 0 (docs/validation.md, "Contact with triquadratic hexahedra"):
 #: the chorded tubes leave link C room to hang free at this pull, at order 1 as at order 2
 SLACK = (0, "facets")
-THREE_LINK_RUNS = [(level, surface) for level in (0, 1) for surface in NAMES]
+#: with link C's spin held (chain3.yaml's hold_spin) the slack link drifts by another turn,
+#: which the state check rejects (``rotation_stretch``): the run fails after five cut-backs
+#: (docs/methods/contact.md, "Not for a body whose spin is held"); it converged slack with the
+#: spin free
+SLACK_FAILS = pytest.mark.xfail(strict=True, reason="chain3 facets L0 order 2: the slack link's turn is rejected")
+THREE_LINK_RUNS = [pytest.param(level, surface, marks=SLACK_FAILS) if (level, surface) == SLACK
+                   else (level, surface) for level in (0, 1) for surface in NAMES]
 
 
 @pytest.mark.parametrize("level, surface", THREE_LINK_RUNS)

@@ -143,7 +143,7 @@ def fig_accuracy(inputs, pulled: str = "link_b/cap_a+cap_b", component: str = "y
         target = best_target(case, mine, refs, pulled, c)
         stopped = [f"{r.label} ({r.status})" for r in mine if not np.isfinite(final_reaction(r, pulled, c))]
         for ax, x_of, what in ((row[0], "dofs", "DOFs"), (row[1], "seconds", "wall time, build + solve (s)")):
-            _panel(ax, accuracy_lines(mine, pulled, c), x_of, target)
+            _panel(ax, accuracy_lines(mine, pulled, c), x_of, target, legend=x_of == "dofs")
             title = f"{case}: final pulled reaction vs {'unknowns' if x_of == 'dofs' else 'wall time'}"
             if stopped:
                 title += "\nnot drawn (stopped early): " + ", ".join(stopped)
@@ -153,8 +153,9 @@ def fig_accuracy(inputs, pulled: str = "link_b/cap_a+cap_b", component: str = "y
     return fig
 
 
-def _panel(ax, lines: list[Line], x_of: str, target: Target | None) -> None:
-    """Draw ``lines`` (x: their ``x_of`` attribute, log scale) and the target line."""
+def _panel(ax, lines: list[Line], x_of: str, target: Target | None, legend: bool = True) -> None:
+    """Draw ``lines`` (x: their ``x_of`` attribute, log scale) and the target line; the
+    legend if ``legend`` (a row's second panel has the same lines)."""
     for line in lines:
         x = getattr(line, x_of)
         ok = np.isfinite(x) & (x > 0)
@@ -168,5 +169,5 @@ def _panel(ax, lines: list[Line], x_of: str, target: Target | None) -> None:
             ax.axhspan(target.value - half, target.value + half, color="0.85", zorder=0)
     ax.set_xscale("log")
     widen_log_x(ax)
-    if lines or target is not None:
-        ax.legend(fontsize=5.5)
+    if legend and (lines or target is not None):
+        ax.legend(fontsize=5.5, framealpha=0.85)

@@ -9,7 +9,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from cgfem.report.runs import BODY, DISPLACEMENT, Run, load_runs
-from cgfem.report.style import FAILED_STYLE, OUTER_NOT_CONVERGED_STYLE, colour, marker, new_figure, pen
+from cgfem.report.style import FAILED_STYLE, OUTER_NOT_CONVERGED_STYLE, colour, marker, new_figure, pen, short_log_ticks
 
 AXES = {"x": 0, "y": 1, "z": 2}
 
@@ -175,7 +175,11 @@ def fig_timings(summaries, stages: tuple[str, ...] = ("build_s", "solve_s")) -> 
                       color=colour(surface), linestyle=styles[cases.index(case) % len(styles)],
                       label=f"{case} {surface}")
         ax.set(title=stage.removesuffix("_s"), xlabel="DOFs", ylabel="seconds")
-    axes[0, 0].legend(ncol=2)
+        short_log_ticks(ax.xaxis)
+        short_log_ticks(ax.yaxis)
+    if groups:      # below the panels, where it hides no line
+        fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center",
+                   ncol=min(4, len(groups)), fontsize=6.5)
     return fig
 
 

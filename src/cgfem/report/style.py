@@ -11,6 +11,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter  # noqa: E402
 
 from cgfem.atomic import write_bytes_atomic  # noqa: E402
 
@@ -64,3 +65,20 @@ def save_figure(fig: Figure, png: str | Path, pdf: str | Path) -> None:
         fig.savefig(buffer, **options)
         write_bytes_atomic(Path(path), buffer.getvalue())
     plt.close(fig)
+
+
+def short_number(value: float) -> str:
+    """``value`` in at most four significant digits, with a k or M suffix from 10^4 on:
+    ``2000``, ``20k``, ``1.5M``, ``0.5``."""
+    for scale, suffix in ((1e6, "M"), (1e4, "k")):
+        if abs(value) >= scale:
+            return f"{value / (scale if suffix == 'M' else 1e3):.3g}{suffix}"
+    return f"{value:.4g}"
+
+
+def short_log_ticks(axis) -> None:
+    """Label a log ``axis`` (``ax.xaxis`` or ``ax.yaxis``) at 1, 2 and 5 times the powers of
+    ten in :func:`short_number`, without minor labels (which run into each other)."""
+    axis.set_major_locator(LogLocator(base=10.0, subs=(1.0, 2.0, 5.0)))
+    axis.set_major_formatter(FuncFormatter(lambda value, _: short_number(value)))
+    axis.set_minor_formatter(NullFormatter())

@@ -18,7 +18,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from cgfem.report.runs import SUMMARY, Run, load_runs
-from cgfem.report.style import colour, marker, new_figure, pen
+from cgfem.report.style import colour, marker, new_figure, pen, short_log_ticks
 
 __all__ = ["Reference", "final_error", "fig_validation", "load_references", "run_errors",
            "von_mises_error"]
@@ -151,11 +151,14 @@ def fig_validation(inputs, von_mises: dict | None = None) -> Figure:
 
 def widen_log_x(ax, span: float = 4.0) -> None:
     """Widen a log x axis to at least the ratio ``span`` about its centre, so that its tick
-    labels stay readable when the runs' DOFs are nearly equal."""
+    labels stay readable when the runs' DOFs are nearly equal, and label it at 1, 2 and 5
+    times the powers of ten in short numbers (``2k``, ``50``, ``1.5M``: no minor labels that
+    run into each other)."""
     lo, hi = ax.get_xlim()
     if lo > 0 and hi / lo < span:
         centre = np.sqrt(lo * hi)
         ax.set_xlim(centre / np.sqrt(span), centre * np.sqrt(span))
+    short_log_ticks(ax.xaxis)
 
 
 def _panel_steps(ax, case: str, ref: Reference, runs: list[Run], key: str) -> None:
