@@ -14,8 +14,9 @@ patches, trimmed caps; the facets' chord gap at this grid is wider than 0.1 mm) 
 boxes pressed together (linear elastic, small strain; planar patches, a body held by
 contact alone along z). Together they call every kernel the examples call: embedding,
 assembly in both kinematics, SPR recovery, contact search, residual and tangent with each
-surface definition, the fit of ``nurbs_fit`` and the boundary tessellation.
-Each run must converge; the results are thrown away.
+surface definition, the fit of ``nurbs_fit`` and the boundary tessellation. Triquadratic
+runs call no kernel beyond these (docs/performance.md, "Compilation"). Each run must
+converge; the results are thrown away.
 """
 
 from __future__ import annotations
