@@ -75,7 +75,8 @@ def test_failure_message_says_what_contact_was_doing(tmp_path):
 
 def test_recorded_changes_count_switches_and_moves():
     """The pair's record between two linearization points: status switches, and active
-    points whose hit moved to another master triangle (facets) or element (NURBS+FE)."""
+    points whose hit moved to another master triangle (facets) or element (NURBS+FE), each
+    named in the failure message by pair, point and pieces."""
     from types import SimpleNamespace
     from cgfem.contact.assembly import ContactSet
     from cgfem.contact.pair import ContactPair, ContactState
@@ -85,18 +86,19 @@ def test_recorded_changes_count_switches_and_moves():
         n = len(piece)
         return RayHits(np.ones(n, bool), np.asarray(piece), np.zeros((n, 2)), np.zeros(n),
                        None if slot is None else np.asarray(slot))
-    pair = SimpleNamespace(state=ContactState(np.zeros(5)))
+    pair = SimpleNamespace(state=ContactState(np.zeros(5)), name="lower/upper")
     ContactPair._record(pair, hits([0, 0, 1, 1, 2], [3, 4, 5, 6, 7]), np.array([1, 1, 1, 0, 0], bool), None)
     ContactPair._record(pair, hits([0, 0, 1, 1, 2], [3, 9, 5, 6, 8]), np.array([1, 1, 0, 1, 0], bool), None)
     # points 2 and 3 switched; point 1 stayed active on another element (point 4 is inactive)
-    assert (pair.state.last_switched, pair.state.last_moved) == (2, 1)
-    facets = SimpleNamespace(state=ContactState(np.zeros(3)))
+    assert pair.state.last_switched.tolist() == [2, 3] and pair.state.last_moved.tolist() == [1]
+    facets = SimpleNamespace(state=ContactState(np.zeros(3)), name="a/b")
     ContactPair._record(facets, hits([4, 5, 6], None), np.ones(3, bool), None)
     ContactPair._record(facets, hits([4, 7, 8], None), np.ones(3, bool), None)
-    assert (facets.state.last_switched, facets.state.last_moved) == (0, 2)
-    text = ContactSet.changes(SimpleNamespace(pairs=[pair, facets]))
-    assert text == ("6 active contact points; at the last iteration 2 switched status and 3 active ones moved "
-                    "to another master triangle or element")
+    assert facets.state.last_switched.size == 0 and facets.state.last_moved.tolist() == [1, 2]
+    text = ContactSet.changes(SimpleNamespace(pairs=[pair, facets]), limit=1)
+    assert text == ("6 active contact points; at the last iteration 2 switched status (lower/upper: point 2 "
+                    "and 1 more) and 3 active ones moved to another master triangle or element (lower/upper: "
+                    "point 1 from 0/4 to 0/9; a/b: point 1 from 5 to 7 and 1 more)")
 
 
 def test_floating_body_is_reported_with_a_vanishing_stabilizing_force(tmp_path):

@@ -164,15 +164,32 @@ class ContactSet:
     def frozen(self) -> list[np.ndarray]:
         return [p.state.p_N.copy() for p in self.pairs]
 
-    def changes(self) -> str:
+    def changes(self, limit: int = 8) -> str:
         """What the contact set did at the last linearization point, for a failure message:
         active points, and since the point before, status switches and active points whose
-        master hit moved to another triangle or element."""
+        master hit moved to another triangle or element, each named by pair and point index
+        (at most ``limit`` per pair; a move with its pieces, ``patch/element`` or the
+        triangle)."""
         active = sum(int(p.state.active.sum()) for p in self.pairs if p.state.active is not None)
-        switched = sum(p.state.last_switched for p in self.pairs)
-        moved = sum(p.state.last_moved for p in self.pairs)
-        return (f"{active} active contact points; at the last iteration {switched} switched status and "
-                f"{moved} active ones moved to another master triangle or element")
+        switched = sum(p.state.last_switched.size for p in self.pairs)
+        moved = sum(p.state.last_moved.size for p in self.pairs)
+
+        def piece(key) -> str:
+            return f"{key[0]}" if key[1] < 0 else f"{key[0]}/{key[1]}"
+
+        def named(lists) -> str:
+            parts = []
+            for p, items in zip(self.pairs, lists):
+                if items:
+                    more = f" and {len(items) - limit} more" if len(items) > limit else ""
+                    parts.append(f"{p.name}: {', '.join(items[:limit])}{more}")
+            return f" ({'; '.join(parts)})" if parts else ""
+
+        which = named([[f"point {i}" for i in p.state.last_switched] for p in self.pairs])
+        where = named([[f"point {i} from {piece(a)} to {piece(b)}" for i, (a, b) in
+                        zip(p.state.last_moved, p.state.last_pieces)] for p in self.pairs])
+        return (f"{active} active contact points; at the last iteration {switched} switched status{which} "
+                f"and {moved} active ones moved to another master triangle or element{where}")
 
     def active(self) -> list[np.ndarray]:
         return [np.zeros(p.n_points, bool) if p.state.active is None else p.state.active.copy()

@@ -107,10 +107,12 @@ class ContactState:
     #: yet) and the returns to such a piece in this increment (:attr:`piece_held`)
     left: np.ndarray | None = None
     returns: np.ndarray | None = None
-    #: what changed between the last two linearization points: points that switched status,
-    #: active points whose hit moved to another master piece (:func:`_master_key`)
-    last_switched: int = 0
-    last_moved: int = 0
+    #: what changed between the last two linearization points: the points that switched
+    #: status, the active points whose hit moved to another master piece
+    #: (:func:`_master_key`), and those moves' pieces before and after (k, 2, 2)
+    last_switched: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    last_moved: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    last_pieces: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2), np.int64))
 
     @property
     def piece_held(self) -> np.ndarray | None:
@@ -382,7 +384,8 @@ class ContactPair:
             # st.hits: the pairing recorded with st.active
             key, before = _master_key(hits), _master_key(st.hits)
             moved = active & st.active & np.any(key != before, axis=1)
-            st.last_switched, st.last_moved = int(np.count_nonzero(switched)), int(np.count_nonzero(moved))
+            st.last_switched, st.last_moved = np.flatnonzero(switched), np.flatnonzero(moved)
+            st.last_pieces = np.stack([before[moved], key[moved]], axis=1)
             if st.returns is not None:
                 st.returns += moved & np.all(key == st.left, axis=1)
                 st.left[moved] = before[moved]
