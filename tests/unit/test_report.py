@@ -21,7 +21,7 @@ from cgfem.report.convergence import fitted_rate
 from cgfem.report.curves import geometry_errors
 from cgfem.report.energy import TOTAL, ErrorRow, energy_errors, read_error_tables, write_error_table
 from cgfem.report.runs import Run, load_runs
-from cgfem.report.style import save_figure
+from cgfem.report.style import new_figure, save_figure, short_log_ticks, short_number
 from cgfem.run import embed_body
 from tests.support.paths import REPO
 
@@ -101,6 +101,23 @@ def _lines(ax):
 
 
 # ---------------------------------------------------------------- rates and fig09
+
+
+def test_log_axes_are_labelled_in_short_numbers_at_1_2_5(tmp_path):
+    """Tick labels on a log axis: 1, 2 and 5 times the powers of ten, in at most four
+    significant digits with k from 10^4 and M from 10^6, and no minor labels."""
+    assert [short_number(v) for v in (0.5, 50, 2000, 9999, 1e4, 2.5e5, 1.5e6)] == \
+        ["0.5", "50", "2000", "9999", "10k", "250k", "1.5M"]
+    fig, axes = new_figure()
+    ax = axes[0, 0]
+    ax.loglog([1500, 60000], [1, 2])
+    short_log_ticks(ax.xaxis)
+    fig.canvas.draw()
+    lo, hi = ax.get_xlim()
+    shown = [t.get_text() for t, x in zip(ax.get_xticklabels(), ax.get_xticks()) if lo <= x <= hi]
+    assert shown == ["2000", "5000", "10k", "20k", "50k"]
+    assert not any(t.get_text() for t in ax.xaxis.get_minorticklabels())
+    save_figure(fig, tmp_path / "ticks.png", tmp_path / "ticks.pdf")     # draws and closes it
 
 
 def test_fitted_rate_recovers_the_synthetic_rate():

@@ -208,10 +208,14 @@ class ContactSet:
     def add(self, u: np.ndarray, r: np.ndarray, tangent: bool, update: bool = True) -> sp.coo_matrix | None:
         """Add the contact residual (and the fit constraints' equations) to ``r`` (n,) in
         place; the tangent (COO on all n unknowns, :attr:`n_extra` included)."""
+        parts = self.parts(u, r, tangent, update)
+        return couplings_matrix(parts, r.size) if tangent else None
+
+    def parts(self, u: np.ndarray, r: np.ndarray, tangent: bool, update: bool = True) -> list[Couplings]:
+        """:meth:`add`'s residual, and its tangent as the items' entries (empty if not
+        ``tangent``), for a caller that merges them with entries of its own."""
         parts = [item.add(u, 0.0, r, tangent, update) for item in self.items]
-        if not tangent:
-            return None
-        return couplings_matrix([p for p in parts if p is not None], r.size)
+        return [p for p in parts if p is not None]
 
     def continuous(self, u: np.ndarray, r: np.ndarray) -> int:
         """Add to ``r`` (n,) in place the contact residual (and the fit constraints'

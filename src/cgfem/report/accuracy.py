@@ -21,7 +21,7 @@ from cgfem.definitions import NURBS_DEFINITIONS
 from cgfem.report.curves import AXES
 from cgfem.report.runs import Run, load_runs
 from cgfem.report.style import new_figure, pen
-from cgfem.report.validation import Reference, load_references, split_inputs, widen_log_x
+from cgfem.report.validation import Reference, load_references, split_inputs, readable_log_x
 
 __all__ = ["CHAINS", "Line", "Target", "accuracy_lines", "best_target", "fig_accuracy",
            "final_reaction", "wall_seconds"]
@@ -168,6 +168,6 @@ def _panel(ax, lines: list[Line], x_of: str, target: Target | None, legend: bool
             half = abs(target.value) * target.uncertainty
             ax.axhspan(target.value - half, target.value + half, color="0.85", zorder=0)
     ax.set_xscale("log")
-    widen_log_x(ax)
+    readable_log_x(ax)
     if legend and (lines or target is not None):
         ax.legend(fontsize=5.5, framealpha=0.85)

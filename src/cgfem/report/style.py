@@ -70,9 +70,9 @@ def save_figure(fig: Figure, png: str | Path, pdf: str | Path) -> None:
 def short_number(value: float) -> str:
     """``value`` in at most four significant digits, with a k or M suffix from 10^4 on:
     ``2000``, ``20k``, ``1.5M``, ``0.5``."""
-    for scale, suffix in ((1e6, "M"), (1e4, "k")):
-        if abs(value) >= scale:
-            return f"{value / (scale if suffix == 'M' else 1e3):.3g}{suffix}"
+    for above, unit, suffix in ((1e6, 1e6, "M"), (1e4, 1e3, "k")):
+        if abs(value) >= above:
+            return f"{value / unit:.3g}{suffix}"
     return f"{value:.4g}"
 
 

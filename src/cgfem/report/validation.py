@@ -149,11 +149,9 @@ def fig_validation(inputs, von_mises: dict | None = None) -> Figure:
     return fig
 
 
-def widen_log_x(ax, span: float = 4.0) -> None:
-    """Widen a log x axis to at least the ratio ``span`` about its centre, so that its tick
-    labels stay readable when the runs' DOFs are nearly equal, and label it at 1, 2 and 5
-    times the powers of ten in short numbers (``2k``, ``50``, ``1.5M``: no minor labels that
-    run into each other)."""
+def readable_log_x(ax, span: float = 4.0) -> None:
+    """Make a log x axis readable: widened to at least the ratio ``span`` about its centre
+    (the runs' DOFs may be nearly equal) and labelled by :func:`~cgfem.report.style.short_log_ticks`."""
     lo, hi = ax.get_xlim()
     if lo > 0 and hi / lo < span:
         centre = np.sqrt(lo * hi)
@@ -204,7 +202,7 @@ def _panel_dofs(ax, case: str, ref: Reference, runs: list[Run], error, what: str
         ax.axhline(uncertainty, color="k", linestyle=":", linewidth=0.8,
                    label=f"reference uncertainty ({uncertainty:.2%})")
     ax.set(title=f"{case}: {what}", xlabel="DOFs", ylabel="|relative error|")
-    widen_log_x(ax)
+    readable_log_x(ax)
     ax.legend(fontsize=5.5)
 
 
@@ -218,5 +216,5 @@ def _panel_absolute(ax, case: str, ref: Reference, runs: list[Run], key: str) ->
     ax.axhline(target, color="k", linewidth=0.8, label=f"reference ({ref.dofs} DOFs, NGSolve)")
     ax.axhspan(target * (1 - ref.uncertainty), target * (1 + ref.uncertainty), color="0.85", zorder=0)
     ax.set(title=f"{case}: final pulled reaction", xlabel="DOFs", ylabel="F_y (N)")
-    widen_log_x(ax)
+    readable_log_x(ax)
     ax.legend(fontsize=5.5)

@@ -19,7 +19,7 @@ import scipy.sparse as sp
 from cgfem.contact.assembly import ContactSet, couplings_matrix
 from cgfem.fem.assembly import index_type
 from cgfem.solve.floating import STRETCH_FLOOR_H, FloatingBodies, rotation_stretch
-from cgfem.solve.items import Block, BodyItem, Couplings
+from cgfem.solve.items import Block, BodyItem
 from cgfem.solve.linear import rigid_body_modes
 from cgfem.solve.onset import OnsetLimit
 from cgfem.solve.spin import SpinSpring
@@ -165,8 +165,8 @@ class System:
         reuse = tangent and kept is not None and (self._small_strain or np.array_equal(kept[0], at))
         r = np.zeros(self.n_dofs)
         parts = [item.add(u, t, r, tangent and not reuse) for item in self.body_items]
-        couplings = self.contact.add(u, r, tangent) if self.contact else None
-        held = [spring.add(u, t, r, tangent) for spring in self.springs]
+        coupled = self.contact.parts(u, r, tangent) if self.contact else []
+        coupled += [spring.add(u, t, r, tangent) for spring in self.springs]
         if not tangent:
             return r, None
         if reuse:
@@ -175,11 +175,8 @@ class System:
             K = self._stack([p.K for p in parts if isinstance(p, Block)])
             self._bodies_tangent = (at.copy(), K)
             self.floating.detect([p.K for p in parts])
-        if held:        # one merge into K with the contact's couplings
-            contact = [Couplings(couplings.row, couplings.col, couplings.data)] if couplings is not None else []
-            couplings = couplings_matrix(contact + held, self.n_dofs)
-        if couplings is not None:
-            K = add_couplings(K, couplings)      # a new matrix: the shift may go into it
+        if coupled:     # the contact's and the springs' entries, merged into K at once
+            K = add_couplings(K, couplings_matrix(coupled, self.n_dofs))   # a new matrix: the shift may go into it
             K = self.floating.shifted(K, t, float(np.linalg.norm(r)), overwrite=True)
         return r, K
 
