@@ -3,7 +3,8 @@ offsets of every body's grid.
 
 For each example x level x definition, ``--count`` seeded random offsets per body (printed,
 so any run can be repeated with ``cgfem run``) are solved, each in its own process; per run:
-status, steps and cut-backs (sub-steps beyond the case's steps), Newton iterations, the
+status, steps and cut-backs (sub-steps beyond the case's steps), the fallback a converged
+step needed (the policy's ``fallbacks``; printed when one did), Newton iterations, the
 final pulled reaction (the first displacement entry whose component ``--component`` is
 nonzero, the contact force for planar) and, for planar, the energy-norm error against the
 body-fitted reference. Per example and definition: the fraction converged, the spread
@@ -71,7 +72,8 @@ def run_one(case: dict, level: int, surface: str, folder: Path, threads: int, po
     return {"status": summary["status"], "message": summary.get("message", ""), "steps": len(steps),
             "cutbacks": max(0, len(steps) - int(case.get("steps", 1))) if summary["status"] == "converged"
             else None, "newton": Run(folder / "out", summary).newton_iterations,
-            "final": final_value(case, steps), "folder": str(folder / "out")}
+            "final": final_value(case, steps), "folder": str(folder / "out"),
+            "fallback": max((s.get("fallback", 0) for s in steps), default=0)}
 
 
 def final_value(case: dict, steps: list[dict]) -> float:
@@ -145,6 +147,7 @@ def main() -> None:
             print(f"{example:>13} set {k:>2} L{level} {surface:>9}: {row['status']:>19} "
                   f"steps {row.get('steps', '-')} cut-backs {row.get('cutbacks', '-')} "
                   f"Newton {row.get('newton', '-')} final {row.get('final', float('nan')):.6g}"
+                  + (f" fallback {row['fallback']}" if row.get("fallback") else "")
                   + (f" error {row['energy_error']:.4f}" if "energy_error" in row else "")
                   + (f"  [{row['message']}]" if row.get("message") else ""), flush=True)
             return row

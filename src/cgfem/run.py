@@ -12,7 +12,7 @@ import os
 import platform
 import signal
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -39,7 +39,7 @@ from cgfem.geometry.measure import BoundaryMeasures, boundary_measures
 from cgfem.results import clear_previous, write_json_atomic, write_step
 from cgfem.solve.linear import available_backends, mkl_threads
 from cgfem.solve.static import StepRecord, solve_static
-from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy, changed
+from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy, changed, fallback_policies
 from cgfem.solve.solves import KRYLOV, solve_path
 from cgfem.solve.system import System
 
@@ -407,13 +407,17 @@ def run_case(case: Case, level: int, surface: str, out: Path,
     clear_previous(out)
     built = time.perf_counter()
     steps: list[dict] = []
+    # the fallbacks this run may take, by number; each step's "fallback" is the one it
+    # converged with (0: none)
+    fallbacks = {str(n): changed(p, replace(policy, fallbacks="none"))
+                 for n, p in fallback_policies(policy, case.held_by_contact_alone)}
 
     def summary(status: str, message: str) -> Path:
         return write_json_atomic(out / "summary.json", {
             "case": case.name, "level": level, "surface": surface, "order": order, "status": status,
             "message": message, "kinematics": case.kinematics, "bodies": measures, "steps": steps,
             "timings": {"build_s": built - started, "solve_s": time.perf_counter() - built},
-            "threads": thread_settings(), "policy": changed(policy),
+            "threads": thread_settings(), "policy": changed(policy), "fallbacks": fallbacks,
             "versions": {"cgfem": __version__, "python": platform.python_version(), "numpy": np.__version__}})
 
     try:
@@ -517,7 +521,7 @@ def _write_step(out: Path, system: System, record: StepRecord, number: int,
              "newton_reference": record.reference,
              "pass_residuals": record.newton_residuals,
              "outer_passes": record.outer_passes, "outer_changes": record.outer_changes,
-             "outer_converged": record.outer_converged,
+             "outer_converged": record.outer_converged, "fallback": record.fallback,
              "reactions": reactions,
              "contact": contact,
              "max_von_mises": {n: o["max_von_mises"] for n, o in zip(names, outputs)},

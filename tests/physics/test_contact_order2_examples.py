@@ -45,15 +45,13 @@ def test_two_link_chains_converge_and_balance(tmp_path, example, level, surface)
 
 
 #: chain3 with facets at level 0 (docs/validation.md, "Contact with triquadratic hexahedra"):
-#: the chorded tubes leave link C room to hang free at this pull, at order 1 as at order 2
+#: the chorded tubes leave link C room to hang free at this pull, at order 1 as at order 2.
+#: With its spin held (chain3.yaml's hold_spin) the slack link drifts by another turn, which
+#: the state check rejects (``rotation_stretch``) at load 0.59 with the default constants and
+#: the first two fallbacks; the third (the energy search, shift 1e-5) reaches full load
+#: (docs/methods/contact.md, "Fallbacks")
 SLACK = (0, "facets")
-#: with link C's spin held (chain3.yaml's hold_spin) the slack link drifts by another turn,
-#: which the state check rejects (``rotation_stretch``): the run fails after five cut-backs
-#: (docs/methods/contact.md, "Not for a body whose spin is held"); it converged slack with the
-#: spin free
-SLACK_FAILS = pytest.mark.xfail(strict=True, reason="chain3 facets L0 order 2: the slack link's turn is rejected")
-THREE_LINK_RUNS = [pytest.param(level, surface, marks=SLACK_FAILS) if (level, surface) == SLACK
-                   else (level, surface) for level in (0, 1) for surface in NAMES]
+THREE_LINK_RUNS = [(level, surface) for level in (0, 1) for surface in NAMES]
 
 
 @pytest.mark.parametrize("level, surface", THREE_LINK_RUNS)
@@ -66,11 +64,13 @@ def test_three_link_chain_converges_and_the_middle_link_balances(tmp_path, level
     step = summary["steps"][-1]
     pairs = step["contact"]["pairs"]
     if (level, surface) == SLACK:
-        # a slack chain: no point in contact, and no force through it (against the kilonewtons
-        # the NURBS definitions carry), its middle link held by its tangent shift alone
-        assert step["contact"]["active_points"] == 0
+        # a slack chain to Newton's tolerance: what touches carries below 1e-8 of Newton's
+        # force scale (0.6 N; 0.08 N measured), against the 10.9 kN of nurbs_fe, and the middle
+        # link is held by its tangent shift and its spin spring alone
+        noise = 1e-8 * step["newton_reference"]
+        assert step["contact"]["active_points"] <= 4
         for force in (step["contact"]["force"], step["reactions"][PULLED], step["reactions"][CLAMPED]):
-            assert np.linalg.norm(force) <= 1e-6
+            assert np.linalg.norm(force) <= noise
         assert step["contact"]["floating"]["link_c"]["free_modes"] == 6
         return
     # link_a (master) on link_c (slave), and link_c (master) on link_b (slave): on the middle

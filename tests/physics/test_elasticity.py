@@ -245,6 +245,9 @@ class _OneDof:
     def held_by_contact_alone(self):
         return False
 
+    def adopt(self, policy):
+        self.policy = policy
+
 
 def test_cut_back_reaches_the_step_in_equal_sub_steps(monkeypatch):
     """An increment that fails is halved until it succeeds; the rest of the step is then
@@ -271,6 +274,53 @@ def test_cut_back_reaches_the_step_in_equal_sub_steps(monkeypatch):
     assert result.failure == IncrementFailure("max_iterations", 1, 0.5, 30)
     assert result.message.endswith("after 1 cut-backs (last attempt: Newton stopped on max_iterations in "
                                    "outer pass 1 at |r|/ref = 5.00e-01 after 30 iterations)")
+
+
+def test_a_step_that_fails_is_tried_again_with_each_fallback(monkeypatch):
+    """A step that fails after its cut-backs is tried again from its last converged state
+    (here 0.5, reached in a sub-step) with the policy's fallbacks in turn, each the run's own
+    constants with its group changed; the run keeps the one that converged for its later
+    steps and each step records it. A fallback of floating constants only is skipped where no
+    body floats; when every fallback fails the message says so."""
+    import cgfem.solve.static as static
+    from dataclasses import replace
+    from cgfem.case.model import SolverOptions
+    from cgfem.solve.outer import Increment, IncrementFailure
+    from cgfem.solve.policy import SolverPolicy
+
+    calls = []
+
+    def increment(system, solves, u, stress, t, options, log, guess=None, loose=True):
+        calls.append((t, system.policy.floating_search, system.policy.acceleration))
+        works = system.policy.acceleration == "anderson" or t <= 0.5
+        if not works:
+            return IncrementFailure("line_search", 1, 1e-3, 3)
+        return Increment(u, stress, stress, [[1.0, 0.0]], [0.0], True)
+
+    monkeypatch.setattr(static, "solve_increment", increment)
+    policy = replace(SolverPolicy(), fallbacks="floating_search=energy; acceleration=anderson")
+    lines: list[str] = []
+    result = static.solve_static(_OneDof(policy), 2, SolverOptions(max_cutbacks=1), log=lines.append)
+    assert result.status == "converged"
+    assert calls == [(0.5, "residual", "aitken"), (1.0, "residual", "aitken"), (0.75, "residual", "aitken"),
+                     (1.0, "residual", "anderson")]
+    assert [(s.load_factor, s.fallback) for s in result.steps] == [(0.5, 0), (1.0, 2)]
+    assert any(line.endswith("fallback 2: the step again from load factor 0.5 with acceleration=anderson")
+               for line in lines)
+
+    class Floating(_OneDof):
+        def held_by_contact_alone(self):
+            return True
+
+    calls.clear()
+    policy = replace(SolverPolicy(), fallbacks="floating_search=energy; floating_turn=0.02")
+    result = static.solve_static(Floating(policy), 2, SolverOptions(max_cutbacks=0))
+    assert result.status == "failed" and [s.load_factor for s in result.steps] == [0.5]
+    assert [c[:2] for c in calls] == [(0.5, "residual"), (1.0, "residual"), (1.0, "energy"), (1.0, "residual")]
+    assert "after 0 cut-backs and 2 fallback(s) (last attempt: Newton stopped on line_search" in result.message
+    calls.clear()
+    result = static.solve_static(_OneDof(policy), 2, SolverOptions(max_cutbacks=0))
+    assert result.status == "failed" and len(calls) == 2 and "fallback" not in result.message
 
 
 def test_a_failure_after_loose_passes_is_tried_again_with_tight_passes(monkeypatch):

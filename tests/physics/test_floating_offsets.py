@@ -37,11 +37,15 @@ SET_4 = {"link_a": [0.8879, 0.8915, 0.5114], "link_c": [0.517, 0.6212, 0.7795],
          "link_b": [0.2107, 0.4276, 0.6633]}
 #: the pulled reaction along y at the shipped offsets, level 0, nurbs_fe (N)
 SHIPPED = 18689.7
+#: the same, as the default constants give it (the pipeline's run, any thread count to 1e-10)
+SHIPPED_DIGITS = 18689.677920868802
 
 
 def run_offset(tmp_path, policy: SolverPolicy, log=lambda message: None, offsets=OFFSETS,
-               free_spin: bool = False):
+               free_spin: bool = False, max_cutbacks: int | None = None):
     data = parse_yaml(CASE.read_text())
+    if max_cutbacks is not None:
+        data["solver"]["max_cutbacks"] = max_cutbacks
     if free_spin:
         del data["bodies"]["link_c"]["hold_spin"]
     for name, offset in offsets.items():
@@ -81,8 +85,8 @@ def test_slack_chain_is_not_reported_converged(tmp_path):
     run fails, keeping only steps at up to 0.19 of the load, where the pull (94 um) has not yet
     closed the coarse grid's contacts. The state check itself: ``tests/physics/test_system.py``."""
     lines: list[str] = []
-    status, summary = run_offset(tmp_path, dataclasses.replace(DEFAULT_POLICY, floating_turn=math.inf),
-                                 lines.append, free_spin=True)
+    status, summary = run_offset(tmp_path, dataclasses.replace(DEFAULT_POLICY, floating_turn=math.inf,
+                                                               fallbacks="none"), lines.append, free_spin=True)
     assert status.status == "failed"
     assert all(step["load_factor"] < 0.5 for step in summary["steps"])
 
@@ -103,3 +107,23 @@ def test_held_spin_converges_where_the_free_spin_failed(tmp_path):
     assert spin["axis"] == [1.0, 0.0, 0.0]
     assert abs(spin["moment"]) <= 0.05 * pulled[1] * 0.015, spin
     assert np.linalg.norm(pulled + clamped) <= 1e-6 * np.linalg.norm(pulled)
+
+
+def test_a_failed_step_converges_with_the_policys_fallback(tmp_path):
+    """The run's own constants fail (each Newton step may turn the middle link by 1e-4 rad:
+    Newton stagnates far from the contacts, no cut-back allowed); the step is tried again
+    from the start with the fallback's constants (the default turn limit) and the run ends
+    where one with the default constants does (to 2e-12: the failed attempt leaves its
+    sticky master pieces to the next, as a cut-back does). The summary lists the fallback and
+    the step says it converged with it."""
+    lines: list[str] = []
+    policy = dataclasses.replace(DEFAULT_POLICY, floating_turn=1e-4, fallbacks="floating_turn=0.07")
+    status, summary = run_offset(tmp_path, policy, lines.append, offsets={}, max_cutbacks=0)
+    assert status.status == "converged", status.message
+    assert summary["policy"]["floating_turn"] == 1e-4
+    assert summary["fallbacks"] == {"1": {"floating_turn": 0.07}}
+    assert [(step["load_factor"], step["fallback"]) for step in summary["steps"]] == [(1.0, 1)]
+    pulled = summary["steps"][-1]["reactions"]["link_b/cap_a+cap_b"][1]
+    assert pulled == pytest.approx(SHIPPED_DIGITS, rel=1e-9)
+    assert any("fallback 1: the step again from load factor 0 with floating_turn=0.07" in line for line in lines)
+

@@ -87,6 +87,8 @@ def test_run_writes_summary_and_steps(tmp_path, capsys):
     assert all(s["outer_converged"] and s["outer_changes"][-1] <= 1e-6 for s in summary["steps"])
     assert (summary["case"], summary["level"], summary["surface"]) == ("link_pull", 0, "nurbs_fe")
     assert summary["policy"] == {}                   # the solver's default constants
+    # the default fallbacks change only constants of bodies held by contact alone: none here
+    assert summary["fallbacks"] == {} and all(s["fallback"] == 0 for s in summary["steps"])
     body = summary["bodies"]["link"]
     assert body["dofs"] == 3 * body["nodes"]
     assert abs(body["volume"] / body["brep_volume"] - 1) < 1e-8
@@ -133,6 +135,7 @@ def test_run_that_fails_keeps_converged_steps_and_exits_1(tmp_path, capsys):
     (["--level", "0", "--policy", "floating_turn=fast"], "--policy"),
     (["--level", "0", "--policy", "no_such_constant=1"], "--policy"),
     (["--level", "0", "--policy", "forcing=-1"], "--policy"),
+    (["--level", "0", "--policy", "fallbacks=floating_turn=x"], "--policy: fallbacks: floating_turn"),
 ])
 def test_run_bad_input_exits_2_with_one_line(tmp_path, capsys, args, field):
     out = tmp_path / "out"

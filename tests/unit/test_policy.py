@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy, changed, policy_with
+from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy, changed, fallback_policies, policy_with
 from cgfem.solve.static import StepControl, predict
 
 
@@ -51,6 +51,36 @@ def test_policy_settings_that_mean_nothing_are_refused_by_name(setting, says):
         policy_with([setting])
 
 
+def test_fallbacks_are_groups_of_settings_tried_in_order():
+    """Each group changes the run's own constants (not the groups before it); a group that
+    changes nothing is no fallback, and without a floating body neither is one that changes
+    only the floating bodies' constants (it would repeat the attempt that failed)."""
+    policy = policy_with(["floating_turn=0.05", "fallbacks=floating_search=energy; "
+                          "floating_turn=0.02, acceleration=anderson; floating_search=residual"])
+    found = fallback_policies(policy)
+    assert [n for n, _ in found] == [1, 2]
+    own = replace(policy, fallbacks="none")
+    assert changed(found[0][1], own) == {"floating_search": "energy"}
+    assert changed(found[1][1], own) == {"floating_turn": 0.02, "acceleration": "anderson"}
+    assert all(p.fallbacks == "none" for _, p in found)
+    assert [n for n, _ in fallback_policies(policy, floating=False)] == [2]
+    assert fallback_policies(replace(DEFAULT_POLICY, fallbacks="none")) == []
+    # the default: the energy line search, then with the floating bodies' shift raised twice
+    assert [changed(p, replace(DEFAULT_POLICY, fallbacks="none")) for _, p in fallback_policies(DEFAULT_POLICY)] \
+        == [{"floating_search": "energy"}, {"floating_search": "energy", "floating_shift": 1e-6},
+            {"floating_search": "energy", "floating_shift": 1e-5}]
+    assert fallback_policies(DEFAULT_POLICY, floating=False) == []
+
+
+@pytest.mark.parametrize("text, says", [("floating_turn=x", "floating_turn must be a number"),
+                                        ("fallbacks=none", "cannot set fallbacks"),
+                                        ("energy", "'energy' is not name=value"),
+                                        ("floating_search=fast", "floating_search must be one of")])
+def test_fallbacks_that_mean_nothing_are_refused_by_name(text, says):
+    with pytest.raises(ValueError, match=f"^fallbacks: .*{says}"):
+        replace(DEFAULT_POLICY, fallbacks=text)
+
+
 def run_steps(steps: int, max_cutbacks: int, largest: float) -> tuple[list[float], bool]:
     """The load factors :class:`StepControl` reaches when every increment larger than
     ``largest`` fails; and whether it reached the end."""
@@ -73,6 +103,19 @@ def test_step_control_halves_a_failed_increment_and_keeps_the_size_that_succeede
     assert done and taken == pytest.approx([0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875, 1.0])
     assert run_steps(2, 1, 0.2) == ([], False)
     assert run_steps(4, 0, 0.25) == (pytest.approx([0.25, 0.5, 0.75, 1.0]), True)
+
+
+def test_step_control_restarts_a_step_from_its_last_converged_load_at_full_size():
+    """A fallback's attempt: the step again from where its sub-steps got to, at the step's
+    own size, with every cut-back again."""
+    control = StepControl(1, 2)
+    assert control.next() == 1.0 and control.cut_back() and control.next() == 0.5
+    control.accept(0.5)
+    assert control.next() == 1.0 and control.cut_back() and control.next() == 0.75
+    assert not control.cut_back()
+    control.restart()
+    assert control.next() == 1.0 and control.cut_back() and control.next() == 1.0
+    assert control.cut_back() and control.next() == 0.75 and not control.cut_back()
 
 
 def test_secant_predictor_is_exact_on_a_linear_path():

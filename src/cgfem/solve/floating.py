@@ -171,9 +171,20 @@ class FloatingBodies:
         self._largest: tuple[float, float] | None = None
         #: whether :meth:`limit` cuts rotations, and per floating body its rotation rows
         #: (:func:`rigid_fit_rows`, built on first use)
+        self._order = order
         self._cuts = order >= policy.rotation_cut_min_order and bool(np.isfinite(policy.floating_rotation))
         self._rows: dict[int, np.ndarray] = {}
         self._held = frozenset(held)
+
+    def adopt(self, policy: SolverPolicy) -> None:
+        """Use ``policy`` from the next Newton step on (a run's fallback), its increment's
+        shift and damping started afresh as in a new increment; the shift is taken again from
+        the next tangent's diagonal where ``floating_shift`` changed."""
+        if policy.floating_shift != self.policy.floating_shift:
+            self._shift = None
+        self._largest, self.damping, self.stabilizing = None, 1.0, {}
+        self.policy = policy
+        self._cuts = self._order >= policy.rotation_cut_min_order and bool(np.isfinite(policy.floating_rotation))
 
     def detect(self, tangents: list[sp.spmatrix]) -> list[int]:
         """Find the floating bodies from each body's own first tangent (once)."""

@@ -28,7 +28,8 @@ continuous and increasing, kinks included, and its zero is where the rocking ste
 stop. Where ``s(0) >= 0`` the residual's search is used: for an exact solve ``s(0) = -du . K du``, so the
 (shifted) tangent curves the wrong way along the step (the contact's curvature terms on the
 floating body's rigid turn; on chain3 at level 0, offset set 4, about 40 % of the steps with
-``nurbs_fit``). The policy's ``floating_search`` chooses it; not the default (measured in
+``nurbs_fit``). The policy's ``floating_search`` chooses it: not the default, every
+fallback's (:attr:`~cgfem.solve.policy.SolverPolicy.fallbacks`; measured in
 ``docs/validation.md``).
 
 ``stagnation=(window, factor)``: Newton stops (reason ``stagnated``) once the smallest

@@ -77,14 +77,23 @@ class SolverPolicy:
         residual norm, as without floating bodies) or ``"energy"`` (the step goes to the least
         energy along it where it descends, :func:`~cgfem.solve.newton.energy_minimum`, so that
         a floating body's soft rigid motion does not rock across a contact point's kink).
-        On chain3 at ten grid offsets per level it converges 51 of 60 runs against 48, none
-        lost, but the faceted middle link settles at other equilibria and one pipeline run
-        needs a cut-back (``docs/validation.md``, "The chains at random grid offsets"): not
-        the default.
+        Not the default (the faceted middle link settles at other equilibria, one pipeline
+        run needs a cut-back: ``docs/validation.md``, "The chains at random grid offsets"),
+        but every fallback's (:attr:`fallbacks`).
     damping_decay, damping_above, damping_max : the Levenberg-Marquardt damping of the shift: a
         step limited to a fraction ``f`` at ``|r|`` above ``damping_above`` of the increment's
         largest multiplies the shift of the next tangents by ``1 / f``; any other step by
         ``damping_decay``; kept in ``[1, damping_max]`` (``damping_max = 1`` turns it off).
+    fallbacks : what a run tries when a step fails after its cut-backs: groups of
+        ``name=value`` settings separated by ``;`` (settings within a group by ``,``); for each
+        group in turn the step is tried again, with every cut-back, from its last converged
+        state with the run's constants and the group's changes, and the run keeps the group
+        that converged for the rest of its steps (:func:`fallback_policies`; ``"none"``: a
+        failed step ends the run). A group that changes only :data:`FLOATING` constants is
+        tried only where a body is held by contact alone. The default: the energy line search,
+        then with it the floating bodies' shift raised to ``1e-6`` and to ``1e-5`` (more damping
+        of their rigid motions). A run that converges without a fallback is untouched
+        (``docs/methods/contact.md``, "Fallbacks").
     rotation_stretch : in small strain a converged state is rejected (the increment cut back)
         where a floating body's linearized rotation stretches a chord between its contacts by
         more than this fraction of the chord's elastic stretch (the rotation is strain-free
@@ -156,6 +165,8 @@ class SolverPolicy:
     damping_decay: float = 0.25
     damping_above: float = 1e-2
     damping_max: float = 1e6
+    fallbacks: str = ("floating_search=energy; floating_search=energy, floating_shift=1e-6; "
+                      "floating_search=energy, floating_shift=1e-5")
     rotation_stretch: float = 1.0
     onset_penetration: float = 0.1
     krylov_min_dofs: int = 20_000
@@ -172,7 +183,17 @@ class SolverPolicy:
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
-            if f.name in CHOICES:
+            if f.name == "fallbacks":
+                if not isinstance(value, str):
+                    raise ValueError(f"fallbacks must be text (name=value groups), got {value!r}")
+                for group in fallback_groups(value):
+                    if any(s.partition("=")[0].strip() == "fallbacks" for s in group):
+                        raise ValueError("fallbacks: a fallback cannot set fallbacks")
+                    try:
+                        policy_with(group, replace(self, fallbacks="none"))
+                    except ValueError as err:
+                        raise ValueError(f"fallbacks: {err}") from None
+            elif f.name in CHOICES:
                 if value not in CHOICES[f.name]:
                     raise ValueError(f"{f.name} must be one of {', '.join(CHOICES[f.name])}, got {value!r}")
             elif isinstance(value, bool) or not isinstance(value, (int, float)) or math.isnan(value) \
@@ -186,13 +207,41 @@ class SolverPolicy:
 CHOICES = {"acceleration": ("aitken", "anderson", "none"), "predictor": ("none", "secant"),
            "floating_search": ("energy", "residual")}
 
-DEFAULT_POLICY = SolverPolicy()
+#: the constants only a body held by contact alone uses (:class:`~cgfem.solve.floating.FloatingBodies`,
+#: the energy line search, the state check of its turn)
+FLOATING = frozenset({"free_mode", "floating_shift", "shift_floor", "floating_step", "floating_turn",
+                      "floating_rotation", "floating_search", "rotation_cut_below", "rotation_cut_min_order",
+                      "damping_decay", "damping_above", "damping_max", "rotation_stretch"})
 
 
-def policy_with(settings: Sequence[str], base: SolverPolicy = DEFAULT_POLICY) -> SolverPolicy:
+def fallback_groups(text: str) -> list[list[str]]:
+    """The settings groups of a ``fallbacks`` text (``"a=1, b=2; c=3"``: ``[["a=1", "b=2"],
+    ["c=3"]]``; ``"none"`` or blank: none)."""
+    if text.strip().lower() == "none":
+        return []
+    return [[s.strip() for s in group.split(",") if s.strip()] for group in text.split(";") if group.strip()]
+
+
+def fallback_policies(policy: SolverPolicy, floating: bool = True) -> list[tuple[int, SolverPolicy]]:
+    """The policies a run falls back to, in order, each with its number (1 for the first group
+    of ``policy.fallbacks``): ``policy`` with the group's constants changed and no fallbacks
+    of its own; without the groups that change only :data:`FLOATING` constants when no body
+    floats (``floating`` False): they would repeat the attempt that failed."""
+    base = replace(policy, fallbacks="none")
+    found = []
+    for number, group in enumerate(fallback_groups(policy.fallbacks), start=1):
+        candidate = policy_with(group, base)
+        moved = changed(candidate, base)
+        if moved and (floating or not set(moved) <= FLOATING):
+            found.append((number, candidate))
+    return found
+
+
+def policy_with(settings: Sequence[str], base: SolverPolicy | None = None) -> SolverPolicy:
     """``base`` with the constants ``settings`` name, each ``"name=value"`` (the value read as
     the constant's type: ``"floating_turn=0.05"``, ``"floating_search=energy"``). Raises
     ValueError naming the setting that is not ``name=value``, not a constant, or out of range."""
+    base = DEFAULT_POLICY if base is None else base
     types = {f.name: type(getattr(base, f.name)) for f in fields(base)}
     changes: dict[str, object] = {}
     for setting in settings:
@@ -221,10 +270,14 @@ def policy_with(settings: Sequence[str], base: SolverPolicy = DEFAULT_POLICY) ->
     return replace(base, **changes)
 
 
-def changed(policy: SolverPolicy, base: SolverPolicy = DEFAULT_POLICY) -> dict[str, object]:
+def changed(policy: SolverPolicy, base: SolverPolicy | None = None) -> dict[str, object]:
     """The constants of ``policy`` that differ from ``base``'s, by name, as JSON can hold
     them: a float that is not finite (``inf`` turns a limit off) as its text, ``"inf"``."""
     def value(v: object) -> object:
         return repr(v) if isinstance(v, float) and not math.isfinite(v) else v
+    base = DEFAULT_POLICY if base is None else base
     return {f.name: value(getattr(policy, f.name)) for f in fields(policy)
             if getattr(policy, f.name) != getattr(base, f.name)}
+
+
+DEFAULT_POLICY = SolverPolicy()

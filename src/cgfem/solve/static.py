@@ -11,10 +11,12 @@ marked ``outer_converged = False`` (and the run's status says so, see :class:`St
 When Newton fails, or two outer passes repeat a state with held contact points against their
 rule (:data:`~cgfem.solve.outer.UNSETTLED`), the increment is halved (at most
 ``max_cutbacks`` times per step, :class:`StepControl`) and the step is reached in several
-sub-steps; if it still fails, the run stops with status ``failed`` and keeps every converged
-step. An increment that fails after its first pass while loose passes are in play
-(:func:`~cgfem.solve.outer.pass_tolerance`: the Krylov path's) is first solved once more from
-the same state with every pass to ``newton_tol``. The system, its items and
+sub-steps; if it still fails, the step is tried again from its last converged state with
+each of the policy's fallbacks in turn (:func:`~cgfem.solve.policy.fallback_policies`; the
+run keeps the one that converged), and when none is left the run stops with status
+``failed`` and keeps every converged step. An increment that fails after its first pass
+while loose passes are in play (:func:`~cgfem.solve.outer.pass_tolerance`: the Krylov
+path's) is first solved once more from the same state with every pass to ``newton_tol``. The system, its items and
 its collaborators are in :mod:`cgfem.solve.system`; the tuning constants in
 :class:`~cgfem.solve.policy.SolverPolicy`, which the system carries.
 """
@@ -29,6 +31,7 @@ import numpy as np
 
 from cgfem.case.model import SolverOptions
 from cgfem.solve.outer import IncrementFailure, Log, pass_tolerance, solve_increment
+from cgfem.solve.policy import changed, fallback_policies
 from cgfem.solve.solves import LinearSolves
 from cgfem.solve.system import System
 
@@ -58,6 +61,8 @@ class StepRecord:
     frozen_stress: list[np.ndarray | None] = field(repr=False)
     recovered: list[np.ndarray] = field(repr=False)
     seconds: float = 0.0
+    #: the number of the policy's fallback the step converged with (0: the run's own policy)
+    fallback: int = 0
     #: the system's whole vector of unknowns: the bodies' ``u`` followed by the contact
     #: set's own unknowns (the fitted surfaces of ``nurbs_fit``, :attr:`System.n_dofs`)
     unknowns: np.ndarray | None = field(default=None, repr=False)
@@ -108,6 +113,11 @@ class StepControl:
         """The increment to ``t`` converged."""
         self.t = t
 
+    def restart(self) -> None:
+        """The step again from the last converged load factor, at its own size and with
+        every cut-back (a fallback's attempt)."""
+        self.size, self.cutbacks = 1.0 / self.steps, 0
+
     def cut_back(self) -> bool:
         """The increment failed: halve it; False when the step has no cut-back left."""
         self.cutbacks += 1
@@ -133,7 +143,9 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
     """Run the load steps; ``on_step`` is called after every converged (sub)step.
 
     A step whose increment fails is reached in sub-steps of half the size (a quarter after
-    a second failure, ...), at most ``options.max_cutbacks`` halvings per step. A (sub)step
+    a second failure, ...), at most ``options.max_cutbacks`` halvings per step, then with
+    each of the policy's fallbacks (module docstring; the record of every step names the one
+    it converged with, :attr:`StepRecord.fallback`). A (sub)step
     whose outer loop stops at ``options.outer_passes`` above ``options.outer_tol`` is kept,
     logged with a ``warning:`` line and makes the status :data:`OUTER_NOT_CONVERGED`."""
     log = log or (lambda message: None)
@@ -142,6 +154,8 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
     recovered: list[np.ndarray | None] = [None] * len(system.bodies)
     control, records = StepControl(steps, options.max_cutbacks), []
     t, last = 0.0, None                                     # the converged state before (t, u)
+    own, fallback = system.policy, 0                        # the run's policy, the fallback in use
+    fallbacks = fallback_policies(own, system.held_by_contact_alone())
     while (t_new := control.next()) is not None:
         start = time.perf_counter()
         guess = predict(system.policy.predictor, t, u, last, t_new)
@@ -153,11 +167,22 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
             log(f"t={t_new:.4g}: {outcome}; again with every outer pass solved to newton_tol")
             outcome = solve_increment(system, solves, u, recovered, t_new, options, log, guess, loose=False)
         if isinstance(outcome, IncrementFailure):
-            if not control.cut_back():
+            if control.cut_back():
+                log(f"cut-back {control.cutbacks}: load increment {control.size:.4g}")
+                continue
+            tried = sum(1 for number, _ in fallbacks if number <= fallback)
+            if tried == len(fallbacks):
+                also = f" and {tried} fallback(s)" if tried else ""
                 return StaticResult(FAILED, records, f"no convergence at load factor {t_new:.6g} "
-                                    f"after {options.max_cutbacks} cut-backs (last attempt: {outcome})",
+                                    f"after {options.max_cutbacks} cut-backs{also} (last attempt: {outcome})",
                                     outcome)
-            log(f"cut-back {control.cutbacks}: load increment {control.size:.4g}")
+            fallback, policy = fallbacks[tried]
+            log(f"t={t_new:.4g}: no convergence after {options.max_cutbacks} cut-backs ({outcome}); "
+                f"fallback {fallback}: the step again from load factor {t:.4g} with "
+                f"{', '.join(f'{k}={v}' for k, v in changed(policy, own).items() if k != 'fallbacks')}")
+            system.adopt(policy)
+            solves.policy = policy
+            control.restart()
             continue
         last = (t, u)
         u, recovered = outcome.u, outcome.recovered
@@ -171,7 +196,7 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
         record = StepRecord(t, outcome.newton_residuals, len(outcome.outer_changes),
                             outcome.outer_changes, outcome.outer_converged,
                             system.split(u.copy()), outcome.frozen_stress, recovered,
-                            time.perf_counter() - start, u.copy(), outcome.reference,
+                            time.perf_counter() - start, fallback, u.copy(), outcome.reference,
                             outcome.continuous_residual, outcome.extended_hits)
         if outcome.extended_hits and outcome.continuous_residual > options.newton_tol:
             log(f"warning: t={t:.4g}: {outcome.extended_hits} active hits lie on the extension of the "

@@ -120,6 +120,12 @@ class System:
         self._bodies_tangent: tuple[np.ndarray, sp.csr_matrix] | None = None
         self._small_strain = not any(b.finite for b in bodies)
 
+    def adopt(self, policy: SolverPolicy) -> None:
+        """Use ``policy`` from now on, in the system and its collaborators (a run's fallback,
+        :func:`~cgfem.solve.policy.fallback_policies`)."""
+        self.policy = self.onset.policy = policy
+        self.floating.adopt(policy)
+
     @property
     def items(self) -> list:
         """Every item, in the order their residuals are summed: bodies, then contact."""
