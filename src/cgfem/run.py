@@ -431,7 +431,15 @@ def run_case(case: Case, level: int, surface: str, out: Path,
             log(f"step {len(steps)} converged at load factor {record.load_factor:.4g} "
                 f"({record.outer_passes} outer passes{outer}, {record.seconds:.2f} s)")
 
-        result = solve_static(system, case.steps, case.solver, log, on_step)
+        def on_drop(kept: int) -> None:
+            # a fallback solves a step again from its start: the sub-steps after the first
+            # ``kept`` are no longer on the run's path; their files go with them
+            for number in range(kept + 1, len(steps) + 1):
+                for path in out.glob(f"*_{number:03d}.*"):
+                    path.unlink()
+            del steps[kept:]
+
+        result = solve_static(system, case.steps, case.solver, log, on_step, on_drop)
     except InputError:
         _remove_created(created)
         raise

@@ -277,22 +277,23 @@ def test_cut_back_reaches_the_step_in_equal_sub_steps(monkeypatch):
 
 
 def test_a_step_that_fails_is_tried_again_with_each_fallback(monkeypatch):
-    """A step that fails after its cut-backs is tried again from its last converged state
-    (here 0.5, reached in a sub-step) with the policy's fallbacks in turn, each the run's own
-    constants with its group changed; the run keeps the one that converged for its later
-    steps and each step records it. A fallback of floating constants only is skipped where no
-    body floats; when every fallback fails the message says so."""
+    """A step that fails after its cut-backs is solved again from where it started (here
+    0.5, the first of two steps) with the policy's fallbacks in turn, each the run's own
+    constants with its group changed; the sub-steps the failed attempt converged are dropped
+    (``on_drop`` hears how many records stay); the run keeps the fallback that converged and
+    each step records it. A fallback of floating constants only is skipped where no body
+    floats; when every fallback fails the message says so."""
     import cgfem.solve.static as static
     from dataclasses import replace
     from cgfem.case.model import SolverOptions
     from cgfem.solve.outer import Increment, IncrementFailure
     from cgfem.solve.policy import SolverPolicy
 
-    calls = []
+    calls, drops = [], []
 
     def increment(system, solves, u, stress, t, options, log, guess=None, loose=True):
         calls.append((t, system.policy.floating_search, system.policy.acceleration))
-        works = system.policy.acceleration == "anderson" or t <= 0.5
+        works = system.policy.acceleration == "anderson" or t <= 0.75
         if not works:
             return IncrementFailure("line_search", 1, 1e-3, 3)
         return Increment(u, stress, stress, [[1.0, 0.0]], [0.0], True)
@@ -300,13 +301,15 @@ def test_a_step_that_fails_is_tried_again_with_each_fallback(monkeypatch):
     monkeypatch.setattr(static, "solve_increment", increment)
     policy = replace(SolverPolicy(), fallbacks="floating_search=energy; acceleration=anderson")
     lines: list[str] = []
-    result = static.solve_static(_OneDof(policy), 2, SolverOptions(max_cutbacks=1), log=lines.append)
+    result = static.solve_static(_OneDof(policy), 2, SolverOptions(max_cutbacks=1), log=lines.append,
+                                 on_drop=drops.append)
     assert result.status == "converged"
     assert calls == [(0.5, "residual", "aitken"), (1.0, "residual", "aitken"), (0.75, "residual", "aitken"),
-                     (1.0, "residual", "anderson")]
+                     (1.0, "residual", "aitken"), (1.0, "residual", "anderson")]
     assert [(s.load_factor, s.fallback) for s in result.steps] == [(0.5, 0), (1.0, 2)]
-    assert any(line.endswith("fallback 2: the step again from load factor 0.5 with acceleration=anderson")
-               for line in lines)
+    assert drops == [1]
+    assert any(line.endswith("fallback 2: the step again from load factor 0.5 (1 converged sub-step(s) "
+                             "dropped) with acceleration=anderson") for line in lines)
 
     class Floating(_OneDof):
         def held_by_contact_alone(self):

@@ -115,6 +115,30 @@ def test_run_writes_summary_and_steps(tmp_path, capsys):
     assert mesh.point_data["displacement"].shape == (body["nodes"], 3)
 
 
+def test_sub_steps_a_fallback_drops_leave_no_files(tmp_path, monkeypatch):
+    """When a fallback solves a step again from its start, the sub-steps of the failed attempt
+    leave the summary and take their files with them (here the solver, after both steps of the
+    link, reports the second one dropped)."""
+    import cgfem.run
+    from cgfem.solve.static import StaticResult
+
+    real = cgfem.run.solve_static
+
+    def dropping(system, steps, options, log, on_step, on_drop):
+        result = real(system, steps, options, log, on_step, on_drop)
+        on_drop(1)
+        return StaticResult(result.status, result.steps[:1])
+
+    monkeypatch.setattr(cgfem.run, "solve_static", dropping)
+    out = tmp_path / "out"
+    assert main(["run", _write(tmp_path, LINK), "--level", "0", "--surface", "facets", "--out", str(out),
+                 "--quiet"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert [s["load_factor"] for s in summary["steps"]] == [0.5]
+    assert sorted(p.name for p in out.iterdir()) == ["boundary_001.vtu", "step_001.vtu", "summary.json",
+                                                     "surface_001.vtu"]
+
+
 def test_run_that_fails_keeps_converged_steps_and_exits_1(tmp_path, capsys):
     out = tmp_path / "out"
     code = main(["run", _write(tmp_path, CRUSH), "--level", "0", "--surface", "facets", "--out", str(out),

@@ -105,17 +105,21 @@ def test_step_control_halves_a_failed_increment_and_keeps_the_size_that_succeede
     assert run_steps(4, 0, 0.25) == (pytest.approx([0.25, 0.5, 0.75, 1.0]), True)
 
 
-def test_step_control_restarts_a_step_from_its_last_converged_load_at_full_size():
-    """A fallback's attempt: the step again from where its sub-steps got to, at the step's
-    own size, with every cut-back again."""
+def test_step_control_restarts_a_step_from_its_start_at_full_size():
+    """A fallback's attempt: the step again from where it started, at the step's own size,
+    with every cut-back again; the step is reached only at its end."""
     control = StepControl(1, 2)
     assert control.next() == 1.0 and control.cut_back() and control.next() == 0.5
     control.accept(0.5)
+    assert not control.step_reached()
     assert control.next() == 1.0 and control.cut_back() and control.next() == 0.75
     assert not control.cut_back()
-    control.restart()
-    assert control.next() == 1.0 and control.cut_back() and control.next() == 1.0
-    assert control.cut_back() and control.next() == 0.75 and not control.cut_back()
+    control.restart(0.0)
+    assert control.next() == 1.0 and control.cut_back() and control.next() == 0.5
+    assert control.cut_back() and control.next() == 0.25 and not control.cut_back()
+    control.restart(0.0)
+    control.accept(control.next())
+    assert control.step_reached() and control.next() is None
 
 
 def test_secant_predictor_is_exact_on_a_linear_path():

@@ -11,10 +11,10 @@ marked ``outer_converged = False`` (and the run's status says so, see :class:`St
 When Newton fails, or two outer passes repeat a state with held contact points against their
 rule (:data:`~cgfem.solve.outer.UNSETTLED`), the increment is halved (at most
 ``max_cutbacks`` times per step, :class:`StepControl`) and the step is reached in several
-sub-steps; if it still fails, the step is tried again from its last converged state with
-each of the policy's fallbacks in turn (:func:`~cgfem.solve.policy.fallback_policies`; the
-run keeps the one that converged), and when none is left the run stops with status
-``failed`` and keeps every converged step. An increment that fails after its first pass
+sub-steps; if it still fails, the step is solved again from where it started with each of
+the policy's fallbacks in turn (:func:`~cgfem.solve.policy.fallback_policies`; the failed
+attempts' sub-steps are dropped, and the run keeps the fallback that converged), and when
+none is left the run stops with status ``failed`` and keeps every converged step. An increment that fails after its first pass
 while loose passes are in play (:func:`~cgfem.solve.outer.pass_tolerance`: the Krylov
 path's) is first solved once more from the same state with every pass to ``newton_tol``. The system, its items and
 its collaborators are in :mod:`cgfem.solve.system`; the tuning constants in
@@ -113,10 +113,14 @@ class StepControl:
         """The increment to ``t`` converged."""
         self.t = t
 
-    def restart(self) -> None:
-        """The step again from the last converged load factor, at its own size and with
+    def step_reached(self) -> bool:
+        """Whether the last converged load factor is the current step's end."""
+        return not self.t < self.step / self.steps - 1e-12 * self.size
+
+    def restart(self, t: float) -> None:
+        """The step again from load factor ``t`` (where it started), at its own size and with
         every cut-back (a fallback's attempt)."""
-        self.size, self.cutbacks = 1.0 / self.steps, 0
+        self.t, self.size, self.cutbacks = t, 1.0 / self.steps, 0
 
     def cut_back(self) -> bool:
         """The increment failed: halve it; False when the step has no cut-back left."""
@@ -139,13 +143,17 @@ def predict(kind: str, t: float, u: np.ndarray, last: tuple[float, np.ndarray] |
 
 
 def solve_static(system: System, steps: int, options: SolverOptions, log: Log | None = None,
-                 on_step: Callable[[StepRecord], None] | None = None) -> StaticResult:
+                 on_step: Callable[[StepRecord], None] | None = None,
+                 on_drop: Callable[[int], None] | None = None) -> StaticResult:
     """Run the load steps; ``on_step`` is called after every converged (sub)step.
 
     A step whose increment fails is reached in sub-steps of half the size (a quarter after
-    a second failure, ...), at most ``options.max_cutbacks`` halvings per step, then with
-    each of the policy's fallbacks (module docstring; the record of every step names the one
-    it converged with, :attr:`StepRecord.fallback`). A (sub)step
+    a second failure, ...), at most ``options.max_cutbacks`` halvings per step. If it still
+    fails it is solved again from where it started with each of the policy's fallbacks in
+    turn (:func:`~cgfem.solve.policy.fallback_policies`): the sub-steps of the failed attempts
+    are dropped from the result, and ``on_drop`` is called with the number of records kept
+    (every record then lies on the path to the last state; each names the fallback it
+    converged with, :attr:`StepRecord.fallback`). A (sub)step
     whose outer loop stops at ``options.outer_passes`` above ``options.outer_tol`` is kept,
     logged with a ``warning:`` line and makes the status :data:`OUTER_NOT_CONVERGED`."""
     log = log or (lambda message: None)
@@ -156,6 +164,8 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
     t, last = 0.0, None                                     # the converged state before (t, u)
     own, fallback = system.policy, 0                        # the run's policy, the fallback in use
     fallbacks = fallback_policies(own, system.held_by_contact_alone())
+    # where the current step started: the records before it and the converged state
+    anchor = (0, t, u, recovered, last)
     while (t_new := control.next()) is not None:
         start = time.perf_counter()
         guess = predict(system.policy.predictor, t, u, last, t_new)
@@ -177,12 +187,19 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
                                     f"after {options.max_cutbacks} cut-backs{also} (last attempt: {outcome})",
                                     outcome)
             fallback, policy = fallbacks[tried]
+            kept, t, u, recovered, last = anchor
+            dropped = len(records) - kept
             log(f"t={t_new:.4g}: no convergence after {options.max_cutbacks} cut-backs ({outcome}); "
-                f"fallback {fallback}: the step again from load factor {t:.4g} with "
-                f"{', '.join(f'{k}={v}' for k, v in changed(policy, own).items() if k != 'fallbacks')}")
+                f"fallback {fallback}: the step again from load factor {t:.4g}"
+                + (f" ({dropped} converged sub-step(s) dropped)" if dropped else "") + " with "
+                + ", ".join(f"{k}={v}" for k, v in changed(policy, own).items() if k != "fallbacks"))
+            if dropped:
+                del records[kept:]
+                if on_drop:
+                    on_drop(kept)
             system.adopt(policy)
             solves.policy = policy
-            control.restart()
+            control.restart(t)
             continue
         last = (t, u)
         u, recovered = outcome.u, outcome.recovered
@@ -205,6 +222,8 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
         records.append(record)
         if on_step:
             on_step(record)
+        if control.step_reached():
+            anchor = (len(records), t, u, recovered, last)
     capped = [r.load_factor for r in records if not r.outer_converged]
     if capped:
         return StaticResult(OUTER_NOT_CONVERGED, records,
