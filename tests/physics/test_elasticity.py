@@ -248,6 +248,12 @@ class _OneDof:
     def adopt(self, policy):
         self.policy = policy
 
+    def saved(self):
+        return []
+
+    def restore(self, saved):
+        pass
+
 
 def test_cut_back_reaches_the_step_in_equal_sub_steps(monkeypatch):
     """An increment that fails is halved until it succeeds; the rest of the step is then

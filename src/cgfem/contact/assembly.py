@@ -14,6 +14,8 @@ surfaces instead of the bodies' dofs.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -90,6 +92,16 @@ class ContactSet:
 
     def __bool__(self) -> bool:
         return bool(self.pairs)
+
+    def saved(self) -> list:
+        """A copy of every pair's state (its last pairing, statuses, held points and pieces,
+        :class:`~cgfem.contact.pair.ContactState`), for :meth:`restore`."""
+        return [copy.deepcopy(p.state) for p in self.pairs]
+
+    def restore(self, states: list) -> None:
+        """Every pair's state as :meth:`saved` copied it (the copy kept for a later restore)."""
+        for pair, state in zip(self.pairs, states):
+            pair.state = copy.deepcopy(state)
 
     @property
     def n_extra(self) -> int:

@@ -86,9 +86,9 @@ class SolverPolicy:
         ``damping_decay``; kept in ``[1, damping_max]`` (``damping_max = 1`` turns it off).
     fallbacks : what a run tries when a step fails after its cut-backs: groups of
         ``name=value`` settings separated by ``;`` (settings within a group by ``,``); for each
-        group in turn the step is tried again, with every cut-back, from its last converged
-        state with the run's constants and the group's changes, and the run keeps the group
-        that converged for the rest of its steps (:func:`fallback_policies`; ``"none"``: a
+        group in turn the step is solved again from where it started, with every cut-back,
+        the run's constants changed by the group (the failed attempts' sub-steps dropped), and
+        the run keeps the group that converged for the rest of its steps (:func:`fallback_policies`; ``"none"``: a
         failed step ends the run). A group that changes only :data:`FLOATING` constants is
         tried only where a body is held by contact alone. The default: the energy line search,
         then with it the floating bodies' shift raised to ``1e-6`` and to ``1e-5`` (more damping

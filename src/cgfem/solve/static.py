@@ -164,8 +164,9 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
     t, last = 0.0, None                                     # the converged state before (t, u)
     own, fallback = system.policy, 0                        # the run's policy, the fallback in use
     fallbacks = fallback_policies(own, system.held_by_contact_alone())
-    # where the current step started: the records before it and the converged state
-    anchor = (0, t, u, recovered, last)
+    # where the current step started: the records before it, the converged state and what
+    # the system had learnt there (a fallback's attempt starts from it as the first one did)
+    anchor = (0, t, u, recovered, last, system.saved())
     while (t_new := control.next()) is not None:
         start = time.perf_counter()
         guess = predict(system.policy.predictor, t, u, last, t_new)
@@ -187,7 +188,8 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
                                     f"after {options.max_cutbacks} cut-backs{also} (last attempt: {outcome})",
                                     outcome)
             fallback, policy = fallbacks[tried]
-            kept, t, u, recovered, last = anchor
+            kept, t, u, recovered, last, saved = anchor
+            system.restore(saved)
             dropped = len(records) - kept
             log(f"t={t_new:.4g}: no convergence after {options.max_cutbacks} cut-backs ({outcome}); "
                 f"fallback {fallback}: the step again from load factor {t:.4g}"
@@ -198,7 +200,7 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
                 if on_drop:
                     on_drop(kept)
             system.adopt(policy)
-            solves.policy = policy
+            solves = LinearSolves.of(system, options.linear, log)     # no analysis kept from the failure
             control.restart(t)
             continue
         last = (t, u)
@@ -223,7 +225,7 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
         if on_step:
             on_step(record)
         if control.step_reached():
-            anchor = (len(records), t, u, recovered, last)
+            anchor = (len(records), t, u, recovered, last, system.saved())
     capped = [r.load_factor for r in records if not r.outer_converged]
     if capped:
         return StaticResult(OUTER_NOT_CONVERGED, records,

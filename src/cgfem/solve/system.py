@@ -126,6 +126,15 @@ class System:
         self.policy = self.onset.policy = policy
         self.floating.adopt(policy)
 
+    def saved(self) -> list:
+        """What the solve has learnt beyond the unknowns (the contact pairs' states), for
+        :meth:`restore`: a fallback starts a step again as the first attempt did."""
+        return self.contact.saved()
+
+    def restore(self, saved: list) -> None:
+        """The state :meth:`saved` returned."""
+        self.contact.restore(saved)
+
     @property
     def items(self) -> list:
         """Every item, in the order their residuals are summed: bodies, then contact."""
