@@ -32,12 +32,24 @@ def _jsonable(value):
     raise TypeError(f"not JSON serializable: {type(value).__name__}")
 
 
+#: the files a converged step writes, ``{prefix}_NNN.vtu`` (``fit_NNN.json`` too)
+STEP_PREFIXES = ("step", "surface", "boundary", "contact", "fit")
+
+
 def clear_previous(folder: Path) -> None:
     """Remove the summary and step files an earlier run left in ``folder``."""
     folder = Path(folder)
-    for pattern in ("summary.json", "step_*.vtu", "surface_*.vtu", "boundary_*.vtu", "contact_*.vtu"):
+    for pattern in ("summary.json", *(f"{prefix}_*" for prefix in STEP_PREFIXES)):
         for old in folder.glob(pattern):
             old.unlink()
+
+
+def remove_steps(folder: Path, numbers) -> None:
+    """Remove the files of steps ``numbers`` (1-based) from ``folder``."""
+    for number in numbers:
+        for prefix in STEP_PREFIXES:
+            for old in Path(folder).glob(f"{prefix}_{number:03d}.*"):
+                old.unlink()
 
 
 def step_mesh(bodies: list[dict]) -> meshio.Mesh:

@@ -36,7 +36,7 @@ from cgfem.fem import spr
 from cgfem.fem.spr import energy_norm, zz_estimate
 from cgfem.geometry.builders import build_solid
 from cgfem.geometry.measure import BoundaryMeasures, boundary_measures
-from cgfem.results import clear_previous, write_json_atomic, write_step
+from cgfem.results import clear_previous, remove_steps, write_json_atomic, write_step
 from cgfem.solve.linear import available_backends, mkl_threads
 from cgfem.solve.static import StepRecord, solve_static
 from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy, changed, fallback_policies
@@ -434,9 +434,7 @@ def run_case(case: Case, level: int, surface: str, out: Path,
         def on_drop(kept: int) -> None:
             # a fallback solves a step again from its start: the sub-steps after the first
             # ``kept`` are no longer on the run's path; their files go with them
-            for number in range(kept + 1, len(steps) + 1):
-                for path in out.glob(f"*_{number:03d}.*"):
-                    path.unlink()
+            remove_steps(out, range(kept + 1, len(steps) + 1))
             del steps[kept:]
 
         result = solve_static(system, case.steps, case.solver, log, on_step, on_drop)

@@ -169,10 +169,9 @@ class FloatingBodies:
         self._scale = 0.0
         self._fading = 1.0
         self._largest: tuple[float, float] | None = None
-        #: whether :meth:`limit` cuts rotations, and per floating body its rotation rows
+        #: the elements' order (:attr:`_cuts`), and per floating body its rotation rows
         #: (:func:`rigid_fit_rows`, built on first use)
         self._order = order
-        self._cuts = order >= policy.rotation_cut_min_order and bool(np.isfinite(policy.floating_rotation))
         self._rows: dict[int, np.ndarray] = {}
         self._held = frozenset(held)
 
@@ -184,7 +183,12 @@ class FloatingBodies:
             self._shift = None
         self._largest, self.damping, self.stabilizing = None, 1.0, {}
         self.policy = policy
-        self._cuts = self._order >= policy.rotation_cut_min_order and bool(np.isfinite(policy.floating_rotation))
+
+    @property
+    def _cuts(self) -> bool:
+        """Whether :meth:`limit` cuts rotations (the elements' order and the policy's)."""
+        p = self.policy
+        return self._order >= p.rotation_cut_min_order and bool(np.isfinite(p.floating_rotation))
 
     def detect(self, tangents: list[sp.spmatrix]) -> list[int]:
         """Find the floating bodies from each body's own first tangent (once)."""

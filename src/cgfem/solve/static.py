@@ -164,9 +164,11 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
     t, last = 0.0, None                                     # the converged state before (t, u)
     own, fallback = system.policy, 0                        # the run's policy, the fallback in use
     fallbacks = fallback_policies(own, system.held_by_contact_alone())
+    untried = list(fallbacks)
     # where the current step started: the records before it, the converged state and what
-    # the system had learnt there (a fallback's attempt starts from it as the first one did)
-    anchor = (0, t, u, recovered, last, system.saved())
+    # the system had learnt there (a fallback's attempt starts from it as the first one did);
+    # kept only where there is a fallback
+    anchor = (0, t, u, recovered, last, system.saved() if fallbacks else None)
     while (t_new := control.next()) is not None:
         start = time.perf_counter()
         guess = predict(system.policy.predictor, t, u, last, t_new)
@@ -181,13 +183,12 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
             if control.cut_back():
                 log(f"cut-back {control.cutbacks}: load increment {control.size:.4g}")
                 continue
-            tried = sum(1 for number, _ in fallbacks if number <= fallback)
-            if tried == len(fallbacks):
-                also = f" and {tried} fallback(s)" if tried else ""
+            if not untried:
+                also = f" and {len(fallbacks)} fallback(s)" if fallbacks else ""
                 return StaticResult(FAILED, records, f"no convergence at load factor {t_new:.6g} "
                                     f"after {options.max_cutbacks} cut-backs{also} (last attempt: {outcome})",
                                     outcome)
-            fallback, policy = fallbacks[tried]
+            fallback, policy = untried.pop(0)
             kept, t, u, recovered, last, saved = anchor
             system.restore(saved)
             dropped = len(records) - kept
@@ -224,7 +225,7 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
         records.append(record)
         if on_step:
             on_step(record)
-        if control.step_reached():
+        if untried and control.step_reached():
             anchor = (len(records), t, u, recovered, last, system.saved())
     capped = [r.load_factor for r in records if not r.outer_converged]
     if capped:
