@@ -16,7 +16,19 @@ pyproject.toml), ``python3 -m pytest -q -n 2 --dist loadfile -m long`` runs them
 
 from __future__ import annotations
 
+import os
+
 import pytest
+
+# pytest-xdist's workers (the README's ``-n 2``) already fill the cores one each: a worker runs
+# numba on one thread, and so does every ``cgfem`` process it starts, unless the environment
+# says otherwise. Besides not oversubscribing the cores, the workers then call (and compile)
+# the one-thread twins of the parallel kernels (cgfem._parallel) that the pipeline's jobs
+# call too, instead of each compiling the parallel versions as well. Tests of the parallel
+# kernels set the thread count of the processes they start themselves. numba reads the
+# variable when it is first imported, after this file.
+if "PYTEST_XDIST_WORKER" in os.environ:
+    os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 
 def pytest_configure(config: pytest.Config) -> None:

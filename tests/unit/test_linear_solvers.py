@@ -317,3 +317,35 @@ def test_pardiso_repeats_bitwise_under_a_concurrent_load() -> None:
         for proc in burners:
             proc.kill()
     assert len(digests) == 1
+
+
+MKL_PROBE = """
+import json, os
+os.environ.pop("PYPARDISO_MKL_RT", None)
+from pypardiso.pardiso_wrapper import PyPardisoSolver
+own = str(PyPardisoSolver().libmkl._name)       # pypardiso's own search (walks site-packages)
+from cgfem.solve import linear
+print(json.dumps([own, linear._mkl_rt(), os.environ.get("PYPARDISO_MKL_RT")]))
+"""
+
+
+@pytest.mark.skipif("pardiso" not in AVAILABLE, reason="pypardiso is not installed")
+def test_pypardiso_is_pointed_at_the_library_its_own_search_finds() -> None:
+    """Naming MKL's runtime to pypardiso (which spares its walk of site-packages) names the
+    library pypardiso's own search finds; where the linker knows it, nothing is named."""
+    import ctypes.util
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "PYPARDISO_MKL_RT"}
+    proc = subprocess.run([sys.executable, "-c", MKL_PROBE], capture_output=True, text=True, env=env,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    own, used, named = json.loads(proc.stdout.strip().splitlines()[-1])
+    if ctypes.util.find_library("mkl_rt"):
+        assert named is None
+    else:
+        assert named is not None and os.path.realpath(named) == os.path.realpath(own)
+    assert os.path.realpath(used) == os.path.realpath(own)

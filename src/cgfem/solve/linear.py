@@ -26,8 +26,13 @@ Which backend a system gets (``auto``) is decided in :mod:`cgfem.solve.backends`
 from __future__ import annotations
 
 import ctypes
+import ctypes.util
 import functools
+import glob
 import importlib
+import os
+import site
+import sys
 import time
 from typing import Any, Callable
 
@@ -81,6 +86,7 @@ class LinearSolverError(RuntimeError):
 def available_backends() -> tuple[str, ...]:
     """The usable backends; pardiso only if pypardiso (and MKL) import."""
     try:
+        _point_pypardiso_at_mkl()
         importlib.import_module("pypardiso")  # loads MKL too
     except (ImportError, OSError):
         return ("superlu", "pyamg")
@@ -200,11 +206,30 @@ class _SuperLU(_DirectSolver):
 
 
 @functools.cache
+def _point_pypardiso_at_mkl() -> None:
+    """Name MKL's runtime library to pypardiso (``PYPARDISO_MKL_RT``) where the environment
+    does not. Each :class:`pypardiso.PyPardisoSolver`, the one pypardiso makes on import
+    among them, asks the linker for ``mkl_rt`` and, where the linker does not know it (a pip
+    install), walks every folder under ``<prefix>/lib*`` for it: 1-1.5 s each time, twice
+    per process. The pip wheel puts the library in ``<prefix>/lib`` itself: the first
+    ``*mkl_rt*`` there (shortest name first, pypardiso's preference) is the one the walk
+    would find. Where none is there, pypardiso searches as before."""
+    if os.environ.get("PYPARDISO_MKL_RT") or ctypes.util.find_library("mkl_rt"):
+        return
+    for prefix in dict.fromkeys((sys.prefix, site.USER_BASE)):
+        found = sorted(glob.glob(f"{glob.escape(prefix)}/[Ll]ib*/*mkl_rt*"), key=len)
+        if found:
+            os.environ["PYPARDISO_MKL_RT"] = found[0]
+            return
+
+
+@functools.cache
 def _mkl_rt() -> str:
-    """The MKL runtime pypardiso finds (its search walks site-packages: 0.5 s each time)."""
+    """The MKL runtime pypardiso uses."""
+    _point_pypardiso_at_mkl()
     from pypardiso.pardiso_wrapper import PyPardisoSolver
 
-    return str(PyPardisoSolver().libmkl._name)
+    return os.environ.get("PYPARDISO_MKL_RT") or str(PyPardisoSolver().libmkl._name)
 
 
 @functools.cache
