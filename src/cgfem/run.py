@@ -157,12 +157,20 @@ def estimate_memory(case: Case, level: int, measures: dict[str, BoundaryMeasures
     return int(total), dofs, krylov
 
 
+def case_measures(case: Case) -> dict[str, BoundaryMeasures]:
+    """The boundary measures of each body of ``case``, by name, from its B-rep (built, about
+    3 ms per body; no grid)."""
+    return {b.name: boundary_measures(build_solid(b.geometry)) for b in case.bodies}
+
+
 def run_memory(case: Case, level: int, surface: str, order: int = 1,
-               policy: SolverPolicy = DEFAULT_POLICY) -> int:
+               policy: SolverPolicy = DEFAULT_POLICY,
+               measures: dict[str, BoundaryMeasures] | None = None) -> int:
     """Bytes a run of ``case`` will hold at most, by :func:`estimate_memory` plus
-    :data:`BASE_MEMORY`: what a scheduler reserves for it (the pipeline's ``mem_mb``). Builds
-    the bodies' B-rep (about 3 ms per body), no grid."""
-    measures = {b.name: boundary_measures(build_solid(b.geometry)) for b in case.bodies}
+    :data:`BASE_MEMORY`: what a scheduler reserves for it (the pipeline's ``mem_mb``).
+    ``measures``: the bodies' :func:`case_measures`, computed here if not given (a caller
+    estimating many runs of one case computes them once)."""
+    measures = case_measures(case) if measures is None else measures
     return estimate_memory(case, level, measures, order, surface, policy)[0] + BASE_MEMORY
 
 

@@ -6,7 +6,7 @@ from pathlib import Path
 from snakemake.utils import validate
 
 from cgfem.case import load_case
-from cgfem.run import machine_memory, run_memory
+from cgfem.run import case_measures, machine_memory, run_memory
 
 
 validate(config, "../schemas/config.schema.yaml")
@@ -43,8 +43,17 @@ if _global_resource("mem_mb") is None and _global_resource("_nodes") is None:
 
 
 @functools.cache
+def _case(path):
+    """The case file ``path`` loaded, and its bodies' boundary measures: once per file, not
+    once per run (85 ms each; snakemake asks for every job's memory)."""
+    case = load_case(Path(path))
+    return case, case_measures(case)
+
+
+@functools.cache
 def _run_memory_mb(case, level, surface, order):
-    need = run_memory(load_case(Path(case)), level, surface, order) // 10**6
+    loaded, measures = _case(case)
+    need = run_memory(loaded, level, surface, order, measures=measures) // 10**6
     limit = _global_resource("mem_mb")
     return int(need if limit is None else min(need, limit))
 
