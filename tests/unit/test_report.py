@@ -157,6 +157,22 @@ def test_fig09_draws_every_definition_with_its_fitted_rate(tmp_path):
     assert (tmp_path / "f.png").stat().st_size > 1000 and (tmp_path / "f.pdf").stat().st_size > 1000
 
 
+
+def test_a_figure_drawn_again_is_the_same_file(tmp_path, monkeypatch):
+    """The same figure saved at two other times gives the same PNG and PDF bytes: the PDF
+    carries no creation date (matplotlib stamps ``SOURCE_DATE_EPOCH``, else the clock)."""
+    files = []
+    for when in ("1000000000", "2000000000"):
+        monkeypatch.setenv("SOURCE_DATE_EPOCH", when)
+        fig, axes = new_figure()
+        axes[0, 0].plot([1.0, 2.0, 3.0], [3.0, 1.0, 2.0], label="a line")
+        axes[0, 0].legend()
+        png, pdf = tmp_path / f"{when}.png", tmp_path / f"{when}.pdf"
+        save_figure(fig, png, pdf)
+        files.append((png.read_bytes(), pdf.read_bytes()))
+    assert files[0] == files[1] and b"/CreationDate" not in files[0][1]
+
+
 # ---------------------------------------------------------------- energy error of a run
 
 

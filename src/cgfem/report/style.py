@@ -59,8 +59,10 @@ def new_figure(n_rows: int = 1, n_cols: int = 1, width: float = 6.5, height: flo
 
 def save_figure(fig: Figure, png: str | Path, pdf: str | Path) -> None:
     """Write ``fig`` as PNG (``PRINT_DPI``) and PDF, each atomically (a reader never sees a
-    part of a file), then close it."""
-    for path, options in ((png, {"format": "png", "dpi": PRINT_DPI}), (pdf, {"format": "pdf"})):
+    part of a file), then close it. The PDF carries no creation date, so that the same figure
+    drawn again is the same file."""
+    for path, options in ((png, {"format": "png", "dpi": PRINT_DPI}),
+                          (pdf, {"format": "pdf", "metadata": {"CreationDate": None}})):
         buffer = io.BytesIO()
         fig.savefig(buffer, **options)
         write_bytes_atomic(Path(path), buffer.getvalue())
