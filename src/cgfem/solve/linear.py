@@ -211,9 +211,10 @@ def _point_pypardiso_at_mkl() -> None:
     does not. Each :class:`pypardiso.PyPardisoSolver`, the one pypardiso makes on import
     among them, asks the linker for ``mkl_rt`` and, where the linker does not know it (a pip
     install), walks every folder under ``<prefix>/lib*`` for it: 1-1.5 s each time, twice
-    per process. The pip wheel puts the library in ``<prefix>/lib`` itself: the first
-    ``*mkl_rt*`` there (shortest name first, pypardiso's preference) is the one the walk
-    would find. Where none is there, pypardiso searches as before."""
+    per process. The pip wheel puts the library in ``<prefix>/lib`` itself, where the walk,
+    which tries the shortest paths first, finds it: the first ``*mkl_rt*`` there (shortest
+    first) is named (a test compares it with the walk's choice). Where none is there,
+    pypardiso searches as before."""
     if os.environ.get("PYPARDISO_MKL_RT") or ctypes.util.find_library("mkl_rt"):
         return
     for prefix in dict.fromkeys((sys.prefix, site.USER_BASE)):
