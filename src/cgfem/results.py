@@ -34,22 +34,25 @@ def _jsonable(value):
 
 #: the files a converged step writes, ``{prefix}_NNN.vtu`` (``fit_NNN.json`` too)
 STEP_PREFIXES = ("step", "surface", "boundary", "contact", "fit")
+#: the files a run writes once: its summary and, with ``nurbs_fit``, the fits at rest
+RUN_FILES = ("summary.json", "fit_reference.json")
+
+
+def _unlink(folder: Path, patterns) -> None:
+    for pattern in patterns:
+        for old in Path(folder).glob(pattern):
+            old.unlink()
 
 
 def clear_previous(folder: Path) -> None:
-    """Remove the summary and step files an earlier run left in ``folder``."""
-    folder = Path(folder)
-    for pattern in ("summary.json", *(f"{prefix}_*" for prefix in STEP_PREFIXES)):
-        for old in folder.glob(pattern):
-            old.unlink()
+    """Remove the files an earlier run left in ``folder`` (:data:`RUN_FILES` and every step's
+    files), and no other."""
+    _unlink(folder, [*RUN_FILES, *(f"{prefix}_[0-9]*.*" for prefix in STEP_PREFIXES)])
 
 
 def remove_steps(folder: Path, numbers) -> None:
     """Remove the files of steps ``numbers`` (1-based) from ``folder``."""
-    for number in numbers:
-        for prefix in STEP_PREFIXES:
-            for old in Path(folder).glob(f"{prefix}_{number:03d}.*"):
-                old.unlink()
+    _unlink(folder, [f"{prefix}_{number:03d}.*" for number in numbers for prefix in STEP_PREFIXES])
 
 
 def step_mesh(bodies: list[dict]) -> meshio.Mesh:

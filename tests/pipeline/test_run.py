@@ -76,8 +76,11 @@ def _write(tmp_path, text, name="case.yaml"):
 def test_run_writes_summary_and_steps(tmp_path, capsys):
     out = tmp_path / "out"
     out.mkdir()
-    (out / "summary.json").write_text("{}")          # a stale result must not survive
-    (out / "step_007.vtu").write_text("stale")
+    # a stale result must not survive (an earlier nurbs_fit run's fits neither); a file of the
+    # user's stays
+    for stale in ("summary.json", "step_007.vtu", "fit_007.json", "fit_007.vtu", "fit_reference.json"):
+        (out / stale).write_text("{}")
+    (out / "step_notes.txt").write_text("mine")
     code = main(["run", _write(tmp_path, LINK), "--level", "0", "--surface", "nurbs_fe", "--out", str(out)])
     assert code == 0
     err = capsys.readouterr().err
@@ -101,8 +104,8 @@ def test_run_writes_summary_and_steps(tmp_path, capsys):
     assert rb[1] < 0 < ra[1]
     assert last["max_von_mises"]["link"] > 0 and last["newton_residuals"][-1] < last["newton_residuals"][0]
     assert sorted(p.name for p in out.iterdir()) == ["boundary_001.vtu", "boundary_002.vtu",
-                                                     "step_001.vtu", "step_002.vtu", "summary.json",
-                                                     "surface_001.vtu", "surface_002.vtu"]
+                                                     "step_001.vtu", "step_002.vtu", "step_notes.txt",
+                                                     "summary.json", "surface_001.vtu", "surface_002.vtu"]
     mesh = meshio.read(out / "step_002.vtu")
     assert mesh.points.shape[0] == body["nodes"]
     assert {"displacement", "stress", "von_mises_nodal"} <= set(mesh.point_data)
