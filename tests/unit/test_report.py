@@ -157,9 +157,8 @@ def test_fig09_draws_every_definition_with_its_fitted_rate(tmp_path):
     assert (tmp_path / "f.png").stat().st_size > 1000 and (tmp_path / "f.pdf").stat().st_size > 1000
 
 
-
 def test_a_figure_drawn_again_is_the_same_file(tmp_path, monkeypatch):
-    """The same figure saved at two other times gives the same PNG and PDF bytes: the PDF
+    """The same figure saved under two clock readings gives the same PNG and PDF bytes: the PDF
     carries no creation date (matplotlib stamps ``SOURCE_DATE_EPOCH``, else the clock)."""
     files = []
     for when in ("1000000000", "2000000000"):

@@ -226,11 +226,13 @@ def _point_pypardiso_at_mkl() -> None:
 
 @functools.cache
 def _mkl_rt() -> str:
-    """The MKL runtime pypardiso uses."""
+    """The MKL runtime pypardiso uses: the one named to it, else the one it finds."""
     _point_pypardiso_at_mkl()
+    if named := os.environ.get("PYPARDISO_MKL_RT"):
+        return named
     from pypardiso.pardiso_wrapper import PyPardisoSolver
 
-    return os.environ.get("PYPARDISO_MKL_RT") or str(PyPardisoSolver().libmkl._name)
+    return str(PyPardisoSolver().libmkl._name)
 
 
 @functools.cache
