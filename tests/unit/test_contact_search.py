@@ -120,6 +120,46 @@ def test_search_equals_reference(scene):
     assert np.all(np.einsum("pk,pk->p", mp.normal, n1[fast.found]) < 0.0)
 
 
+def test_seeds_move_with_the_surface(scene):
+    """The seeds' current positions are the current surface at their parameters."""
+    surface, _, _, u = scene
+    rows = np.arange(0, surface.seed_piece.size, 3)
+    with np.errstate(invalid="ignore"):                 # normals at the poles: unused
+        x = surface.evaluate(u, surface.seed_piece[rows], surface.seed_theta[rows], second=False).x
+    np.testing.assert_allclose(surface._seed_positions(u, rows), x, rtol=0.0, atol=1e-12)
+    np.testing.assert_array_equal(surface._seed_positions(u)[rows], surface._seed_positions(u, rows))
+
+
+def test_starts_are_the_nearest_seeds_of_the_samples(scene):
+    """Every ray's starts, against brute force: the nearest seeds of its segment's samples
+    (within SAMPLE_REACH spacings), nearest to the ray first (ties in sample order), those
+    within twice the spacing and each once; then no start (-1)."""
+    surface, x1, n1, u = scene
+    piece, theta = surface._starts(u, x1, n1, MAX_GAP)
+    seeds = surface._seed_positions(u)
+    m = int(np.ceil(2.0 * MAX_GAP / surface.spacing)) + 1
+    assert piece.shape == (x1.shape[0], min(m, 4 * CANDIDATES)) and theta.shape == piece.shape + (2,)
+    ts = np.linspace(-MAX_GAP, MAX_GAP, m)
+    counts = []
+    for p in range(x1.shape[0]):
+        samples = x1[p] + ts[:, None] * n1[p]
+        d = np.linalg.norm(samples[:, None] - seeds[None], axis=2)
+        nearest = np.argmin(d, axis=1)
+        v = seeds[nearest] - x1[p]
+        off = np.linalg.norm(np.cross(v, n1[p]), axis=1)
+        off[d[np.arange(m), nearest] > SAMPLE_REACH * surface.spacing] = np.inf
+        order = np.argsort(off, kind="stable")[:piece.shape[1]]
+        chosen = [nearest[j] for c, j in enumerate(order)
+                  if off[j] <= 2.0 * surface.spacing and nearest[j] not in nearest[order[:c]]]
+        k = len(chosen)
+        counts.append(k)
+        np.testing.assert_array_equal(piece[p, :k], surface.seed_piece[chosen])
+        np.testing.assert_array_equal(theta[p, :k], surface.seed_theta[chosen])
+        assert np.all(piece[p, k:] == -1)
+    # not vacuous: rays with several starts and rays with none
+    assert max(counts) >= 3 and min(counts) == 0
+
+
 def test_master_facing_the_ray_is_no_hit(scene):
     """Points 0.1 inside the master sphere whose normals point out: the ray meets the surface
     at g ~ 0.1, but its normal goes the ray's way (not opposing the slave's), so there is no

@@ -133,8 +133,8 @@ class FittedSurface(RaySurface):
         n, w = nodes.shape
         #: controls a point moves with (at the seeds; a point elsewhere may have a few more)
         self.width = w
-        self._seed_S = sp.csr_matrix((coef[:, 0].ravel(), nodes.ravel(), np.arange(0, n * w + 1, w)),
-                                     shape=(n, self.n_nodes))
+        self._seed_coef = np.ascontiguousarray(coef[:, 0])
+        self._seed_nodes = np.ascontiguousarray(nodes, dtype=np.int64)
         self.spacing = (float(cKDTree(self._seed_X).query(self._seed_X, k=2)[0][:, 1].max())
                         if n > 1 else self.h)
         points = np.concatenate([f.control_points for f in self.fits])
@@ -220,10 +220,6 @@ class FittedSurface(RaySurface):
         normal = m2 / np.linalg.norm(m2, axis=1)[:, None]
         return MasterPoints(d[:, 0], t, s, coef[:, 0], coef[:, 1:3], np.full(piece.size, -1, np.int64),
                             normal, nodes)
-
-    def _seed_positions(self, z: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
-        rows = slice(None) if rows is None else rows
-        return self._seed_X[rows] + self._seed_S[rows] @ np.asarray(z, float).reshape(-1, 3)
 
     def _may_hit(self, z: np.ndarray, x1: np.ndarray, max_gap: float, n1: np.ndarray) -> np.ndarray:
         """Every ray is tried (a ray no seed lies near gets no start)."""

@@ -32,10 +32,10 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from cgfem.contact import _ray_kernels as _rk
+from cgfem.contact import _seed_kernels as _sk
 from cgfem.contact._facet_kernels import triangle_hits
 from cgfem.contact.kinematics import MasterPoints, SlaveFrames
 from cgfem.embedding.partition import SurfaceQuadrature
@@ -174,9 +174,11 @@ class RaySurface:
     :class:`NurbsFeSurface` and :class:`~cgfem.contact.fitted.FittedSurface`).
 
     A subclass sets ``seed_piece`` (n_seeds,) and ``seed_theta`` (n_seeds, 2) (its patches in
-    the numbering of its packed ``_layout``, ``_knots``), ``spacing`` (the largest distance
-    from a seed to its nearest neighbour) and ``h``, and implements
-    :meth:`_seed_positions`, :meth:`_may_hit` and :meth:`_kernel_data`.
+    the numbering of its packed ``_layout``, ``_knots``), how the seeds move (``_seed_X``
+    (n_seeds, 3) their reference positions, ``_seed_coef`` and ``_seed_nodes`` (n_seeds, w)
+    the basis and nodes each moves with, :func:`~cgfem.contact._seed_kernels.moved_seeds`),
+    ``spacing`` (the largest distance from a seed to its nearest neighbour) and ``h``, and
+    implements :meth:`_may_hit` and :meth:`_kernel_data`.
     """
 
     seed_piece: np.ndarray
@@ -189,9 +191,18 @@ class RaySurface:
     polish: bool = False
     _knots: np.ndarray
 
+    _seed_X: np.ndarray
+    _seed_coef: np.ndarray
+    _seed_nodes: np.ndarray
+
     def _seed_positions(self, u: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
-        """Current positions (n_seeds, 3) of the seeds (of seeds ``rows`` only)."""
-        raise NotImplementedError
+        """Current positions (n_seeds, 3) of the seeds (of seeds ``rows`` only) at the
+        unknowns ``u`` (3 per node)."""
+        rows = np.arange(self._seed_X.shape[0]) if rows is None else np.asarray(rows, np.int64)
+        out = np.empty((rows.size, 3))
+        _sk.moved_seeds(self._seed_X, self._seed_coef, self._seed_nodes, rows,
+                        np.ascontiguousarray(u, dtype=float).reshape(-1, 3), out)
+        return out
 
     def _may_hit(self, u: np.ndarray, x1: np.ndarray, max_gap: float, n1: np.ndarray) -> np.ndarray:
         """(n,) bool: the ray segments may meet the surface (False: skip them)."""
@@ -285,25 +296,13 @@ class RaySurface:
         tree = surface_tree(seeds_x)
         # a sample farther than SAMPLE_REACH spacings from every seed has none: the bounded
         # query is much cheaper for the many rays that miss (docs/performance.md)
-        _, idx = tree.query(samples.reshape(-1, 3), distance_upper_bound=SAMPLE_REACH * self.spacing,
-                            workers=numba.get_num_threads())
-        idx = idx.reshape(n, m)
-        missing = idx >= seeds_x.shape[0]
-        idx[missing] = 0
-        v = seeds_x[idx] - x1[:, None, :]
-        idx = near[idx]
-        off_ray = np.linalg.norm(v - np.einsum("pjk,pk->pj", v, n1)[:, :, None] * n1[:, None, :], axis=2)
-        off_ray[missing] = np.inf
-        order = np.argsort(off_ray, axis=1, kind="stable")[:, :min(m, 4 * CANDIDATES)]
-        chosen = np.take_along_axis(idx, order, axis=1)
-        use = np.take_along_axis(off_ray, order, axis=1) <= 2.0 * self.spacing
-        for c in range(1, chosen.shape[1]):                              # each seed once
-            use[:, c] &= np.all(chosen[:, :c] != chosen[:, c:c + 1], axis=1)
-        # the used seeds first, in their order
-        keep = np.argsort(~use, axis=1, kind="stable")
-        chosen = np.take_along_axis(chosen, keep, axis=1)
-        use = np.take_along_axis(use, keep, axis=1)
-        return np.where(use, self.seed_piece[chosen], -1), self.seed_theta[chosen]
+        _, found = tree.query(samples.reshape(-1, 3), distance_upper_bound=SAMPLE_REACH * self.spacing,
+                              workers=numba.get_num_threads())
+        k = min(m, 4 * CANDIDATES)
+        piece, theta = np.empty((n, k), np.int64), np.empty((n, k, 2))
+        _sk.nearest_starts(seeds_x, found.reshape(n, m), near, x1, n1, 2.0 * self.spacing, self.seed_piece,
+                           self.seed_theta, piece, theta)
+        return piece, theta
 
 
 class NurbsFeSurface(RaySurface):
@@ -341,13 +340,9 @@ element of its space)."""
         for pid in np.unique(self.seed_piece):
             rows = self.seed_piece == pid
             self._seed_X[rows] = solid.patches[pid].surface.evaluate(self.seed_theta[rows])
-        N = space.element.tabulate(self._seed_xi, self.h)[0]
-        k = N.shape[1]
-        #: the seeds' shape functions as a sparse (n_seeds, n_nodes) matrix: their positions
-        #: are one sparse product per search (gathering (n_seeds, n_nodes, 3) values was a
-        #: tenth of a run's time at order 2)
-        self._seed_S = sp.csr_matrix((N.ravel(), space.connectivity[self._seed_slot].ravel(),
-                                      np.arange(0, k * N.shape[0] + 1, k)), shape=(N.shape[0], space.n_nodes))
+        #: the seeds' shape functions (n_seeds, n_nodes) on their elements' nodes
+        self._seed_coef = np.ascontiguousarray(space.element.tabulate(self._seed_xi, self.h)[0])
+        self._seed_nodes = np.ascontiguousarray(space.connectivity[self._seed_slot], dtype=np.int64)
         self._centres = space.centres()
         self._layout, self._knots, self._control = pack_patches([p.surface for p in solid.patches])
 
@@ -445,13 +440,6 @@ element of its space)."""
         return (self._control, np.asarray(grid.origin, float), float(self.h), np.asarray(grid.shape, np.int64),
                 self.space.elements, self.space.connectivity, np.ascontiguousarray(u, dtype=float).reshape(-1, 3),
                 RAY_TOL)
-
-    def _seed_positions(self, u: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
-        """Current positions (n_seeds, 3) of the seeds (of seeds ``rows`` only)."""
-        U = np.asarray(u, float).reshape(-1, 3)
-        if rows is None:
-            return self._seed_X + self._seed_S @ U
-        return self._seed_X[rows] + self._seed_S[rows] @ U
 
 
 class FacetSurface:
