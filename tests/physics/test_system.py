@@ -323,3 +323,16 @@ def test_rotation_stretch_of_a_turned_and_strained_body():
     assert spurious == pytest.approx((0.05 * 0.4) ** 2 / 0.8, rel=1e-2)
     assert elastic == pytest.approx(strain * 0.4, rel=1e-2)
     assert room == pytest.approx(3e-4)
+
+
+def test_the_policy_sets_the_held_spins_spring(small_pair):
+    """``spin_stiffness`` is the spring per node over ``E h``: a system given ten times the
+    default holds the ball's spin ten times as stiffly, with the same measure of the spin."""
+    case, (box, ball) = small_pair
+    holds = {"ball": ((1.0, 0.0, 0.0), 5.0e8)}
+    default = System([box, ball], holds=holds).springs
+    stiffer = System([box, ball], policy=SolverPolicy(spin_stiffness=10.0 * SolverPolicy().spin_stiffness),
+                     holds=holds).springs
+    assert len(default) == len(stiffer) == 1 and default[0].stiffness > 0.0
+    assert stiffer[0].stiffness == pytest.approx(10.0 * default[0].stiffness, rel=1e-12)
+    np.testing.assert_array_equal(stiffer[0].g, default[0].g)

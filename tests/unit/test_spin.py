@@ -10,7 +10,8 @@ import pytest
 from cgfem.case import parse_case, parse_yaml
 from cgfem.contact.assembly import couplings_matrix
 from cgfem.solve.floating import rigid_fit_rows
-from cgfem.solve.spin import SPIN_NODES, SPIN_STIFFNESS, SpinSpring, spin_nodes, unit_axis
+from cgfem.solve.policy import DEFAULT_POLICY
+from cgfem.solve.spin import SPIN_NODES, SpinSpring, spin_nodes, unit_axis
 from tests.support.paths import CASES
 
 
@@ -98,7 +99,7 @@ def test_stiffness_is_the_nodal_stiffness_on_the_chosen_nodes():
     Xs = X[spin_nodes(X, AXIS)]
     r = Xs - Xs.mean(axis=0)
     a = unit_axis(AXIS)
-    assert spring.stiffness == pytest.approx(SPIN_STIFFNESS * 2e11 * 0.004 * (np.sum(r ** 2) - np.sum((r @ a) ** 2)),
+    assert spring.stiffness == pytest.approx(DEFAULT_POLICY.spin_stiffness * 2e11 * 0.004 * (np.sum(r ** 2) - np.sum((r @ a) ** 2)),
                                              rel=1e-12)
     assert np.allclose(spring.g, a @ rigid_fit_rows(Xs)[3:])
 

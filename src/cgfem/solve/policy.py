@@ -94,6 +94,9 @@ class SolverPolicy:
         then with it the floating bodies' shift raised to ``1e-6`` and to ``1e-5`` (more damping
         of their rigid motions). A run that converges without a fallback is untouched
         (``docs/methods/contact.md``, "Fallbacks").
+    spin_stiffness : the spring on a held spin (``bodies.<name>.hold_spin``,
+        :class:`~cgfem.solve.spin.SpinSpring`) on each of the nodes that measure the spin, as a
+        fraction of the grid's nodal stiffness ``E h``.
     rotation_stretch : in small strain a converged state is rejected (the increment cut back)
         where a floating body's linearized rotation stretches a chord between its contacts by
         more than this fraction of the chord's elastic stretch (the rotation is strain-free
@@ -168,6 +171,7 @@ class SolverPolicy:
     fallbacks: str = ("floating_search=energy; floating_search=energy, floating_shift=1e-6; "
                       "floating_search=energy, floating_shift=1e-5")
     rotation_stretch: float = 1.0
+    spin_stiffness: float = 1e-2
     onset_penetration: float = 0.1
     krylov_min_dofs: int = 20_000
     krylov_nonsymmetric_min_dofs: int = 100_000
@@ -211,7 +215,8 @@ CHOICES = {"acceleration": ("aitken", "anderson", "none"), "predictor": ("none",
 #: the energy line search, the state check of its turn)
 FLOATING = frozenset({"free_mode", "floating_shift", "shift_floor", "floating_step", "floating_turn",
                       "floating_rotation", "floating_search", "rotation_cut_below", "rotation_cut_min_order",
-                      "damping_decay", "damping_above", "damping_max", "rotation_stretch"})
+                      "damping_decay", "damping_above", "damping_max", "rotation_stretch",
+                      "spin_stiffness"})
 
 
 def fallback_groups(text: str) -> list[list[str]]:

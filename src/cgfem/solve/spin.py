@@ -16,9 +16,9 @@ body, the node farthest from the axis in each of as many equal sectors of angle 
 (among the nodes farther from it than ``SPIN_QUANTILE`` of them), and adds the energy
 ``k theta^2 / 2``: residual ``k theta g``, tangent ``k g g^T`` (exact: ``theta`` is linear
 in ``u``). A rigid spin gives ``theta`` exactly; a translation or a turn about a
-perpendicular axis gives 0. The stiffness ``k = SPIN_STIFFNESS E h sum |r_perp|^2`` (N m/rad)
-is that of a spring of ``SPIN_STIFFNESS`` times the grid's nodal stiffness ``E h`` on each of
-those nodes, ``r_perp`` its distance to the axis: over a hundred times the spin's spurious
+perpendicular axis gives 0. The stiffness ``k = s E h sum |r_perp|^2`` (N m/rad) is that of
+a spring of ``s`` times the grid's nodal stiffness ``E h`` on each of those nodes
+(``s``: the policy's ``spin_stiffness``), ``r_perp`` its distance to the axis: over a hundred times the spin's spurious
 ``2 F a`` on chain3, and a hundredth of the bulk's entries, so that the spin can still give a
 little where the discrete contact forces push it. The spring's moment ``k theta`` is what holding the spin takes; on a
 surface of revolution about the axis the contact forces have no moment about it, so the
@@ -31,14 +31,13 @@ import numpy as np
 
 from cgfem.geometry.builders import orthonormal_frame
 from cgfem.solve.floating import rigid_fit_rows
+from cgfem.solve.policy import DEFAULT_POLICY
 from cgfem.solve.items import Couplings
 
 #: the nodes the spin is measured on: one per sector of angle about the axis
 SPIN_NODES = 48
 #: of the nodes, only those farther from the axis than this fraction of them
 SPIN_QUANTILE = 0.7
-#: the spring on each chosen node, as a fraction of the grid's nodal stiffness ``E h``
-SPIN_STIFFNESS = 1e-2
 
 
 def spin_nodes(coordinates: np.ndarray, axis: np.ndarray, count: int = SPIN_NODES) -> np.ndarray:
@@ -75,11 +74,13 @@ def unit_axis(axis) -> np.ndarray:
 class SpinSpring:
     """The spring on the spin about ``axis`` (3,) of the body whose dofs are
     ``start:start + 3 n``, its nodes at ``coordinates`` (n, 3) (m), Young's modulus ``E``
-    (Pa) and element size ``h`` (m) (module docstring). An item of the system
+    (Pa), element size ``h`` (m) and ``stiffness`` ``s`` (the spring per node over ``E h``;
+    module docstring). An item of the system
     (:mod:`cgfem.solve.items`): :meth:`add` adds its residual and returns its tangent's
     entries (constant: built once)."""
 
-    def __init__(self, name: str, start: int, coordinates: np.ndarray, axis, E: float, h: float):
+    def __init__(self, name: str, start: int, coordinates: np.ndarray, axis, E: float, h: float,
+                 stiffness: float = DEFAULT_POLICY.spin_stiffness):
         self.name = name
         self.axis = unit_axis(axis)
         X = np.asarray(coordinates, float)
@@ -93,7 +94,7 @@ class SpinSpring:
         r = X[nodes] - X[nodes].mean(axis=0)
         perp = r - np.outer(r @ self.axis, self.axis)
         #: the spring's stiffness (N m/rad)
-        self.stiffness = SPIN_STIFFNESS * float(E) * float(h) * float((perp ** 2).sum())
+        self.stiffness = float(stiffness) * float(E) * float(h) * float((perp ** 2).sum())
         m = self.dofs.size
         self._tangent = Couplings(np.repeat(self.dofs, m), np.tile(self.dofs, m),
                                   self.stiffness * np.outer(self.g, self.g).ravel())

@@ -101,7 +101,8 @@ class System:
         #: the springs holding bodies' spins: ``holds`` maps a body's name to its spin axis and
         #: Young's modulus (Pa) (``bodies.<name>.hold_spin``, :mod:`cgfem.solve.spin`)
         holds = holds or {}
-        self.springs = [SpinSpring(b.name, int(a), b.space.coordinates, *holds[b.name], b.space.h)
+        self.springs = [SpinSpring(b.name, int(a), b.space.coordinates, *holds[b.name], b.space.h,
+                                   policy.spin_stiffness)
                         for b, a in zip(bodies, self.offsets[:-1]) if b.name in holds]
         #: the bodies held by contact alone, their tangent shift and step limit
         self.floating = FloatingBodies(self.offsets, [b.space.h for b in bodies],
