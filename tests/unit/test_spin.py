@@ -99,8 +99,10 @@ def test_stiffness_is_the_nodal_stiffness_on_the_chosen_nodes():
     Xs = X[spin_nodes(X, AXIS)]
     r = Xs - Xs.mean(axis=0)
     a = unit_axis(AXIS)
-    assert spring.stiffness == pytest.approx(DEFAULT_POLICY.spin_stiffness * 2e11 * 0.004 * (np.sum(r ** 2) - np.sum((r @ a) ** 2)),
-                                             rel=1e-12)
+    perp2 = np.sum(r ** 2) - np.sum((r @ a) ** 2)
+    assert spring.stiffness == pytest.approx(DEFAULT_POLICY.spin_stiffness * 2e11 * 0.004 * perp2, rel=1e-12)
+    assert SpinSpring("ring", 0, X, AXIS, E=2e11, h=0.004, stiffness=0.5).stiffness == pytest.approx(
+        0.5 * 2e11 * 0.004 * perp2, rel=1e-12)
     assert np.allclose(spring.g, a @ rigid_fit_rows(Xs)[3:])
 
 

@@ -94,15 +94,15 @@ class SolverPolicy:
         then with it the floating bodies' shift raised to ``1e-6`` and to ``1e-5`` (more damping
         of their rigid motions). A run that converges without a fallback is untouched
         (``docs/methods/contact.md``, "Fallbacks").
-    spin_stiffness : the spring on a held spin (``bodies.<name>.hold_spin``,
-        :class:`~cgfem.solve.spin.SpinSpring`) on each of the nodes that measure the spin, as a
-        fraction of the grid's nodal stiffness ``E h``.
     rotation_stretch : in small strain a converged state is rejected (the increment cut back)
         where a floating body's linearized rotation stretches a chord between its contacts by
         more than this fraction of the chord's elastic stretch (the rotation is strain-free
         but not length-preserving), more than the gaps at the chord's ends and more than
         ``STRETCH_FLOOR_H`` element sizes (:meth:`~cgfem.solve.system.System.turned_floating`);
         ``inf`` turns the check off.
+    spin_stiffness : the spring on a held spin (``bodies.<name>.hold_spin``,
+        :class:`~cgfem.solve.spin.SpinSpring`) on each of the nodes that measure the spin, as a
+        fraction of the grid's nodal stiffness ``E h``.
 
     Contact onset (:class:`~cgfem.solve.onset.OnsetLimit`)
     -------------------------------------------------------

@@ -17,10 +17,10 @@ body, the node farthest from the axis in each of as many equal sectors of angle 
 ``k theta^2 / 2``: residual ``k theta g``, tangent ``k g g^T`` (exact: ``theta`` is linear
 in ``u``). A rigid spin gives ``theta`` exactly; a translation or a turn about a
 perpendicular axis gives 0. The stiffness ``k = s E h sum |r_perp|^2`` (N m/rad) is that of
-a spring of ``s`` times the grid's nodal stiffness ``E h`` on each of those nodes
-(``s``: the policy's ``spin_stiffness``), ``r_perp`` its distance to the axis: over a hundred times the spin's spurious
-``2 F a`` on chain3, and a hundredth of the bulk's entries, so that the spin can still give a
-little where the discrete contact forces push it. The spring's moment ``k theta`` is what holding the spin takes; on a
+a spring of ``s`` times the grid's nodal stiffness ``E h`` on each of those nodes (``s``: the
+policy's ``spin_stiffness``), ``r_perp`` its distance to the axis: at the default ``s`` over a
+hundred times the spin's spurious ``2 F a`` on chain3, and a hundredth of the bulk's entries,
+so that the spin can still give a little where the discrete contact forces push it. The spring's moment ``k theta`` is what holding the spin takes; on a
 surface of revolution about the axis the contact forces have no moment about it, so the
 moment is what the discretization breaks of that symmetry (reported per step in the summary).
 """
@@ -31,8 +31,8 @@ import numpy as np
 
 from cgfem.geometry.builders import orthonormal_frame
 from cgfem.solve.floating import rigid_fit_rows
-from cgfem.solve.policy import DEFAULT_POLICY
 from cgfem.solve.items import Couplings
+from cgfem.solve.policy import DEFAULT_POLICY
 
 #: the nodes the spin is measured on: one per sector of angle about the axis
 SPIN_NODES = 48
@@ -75,9 +75,8 @@ class SpinSpring:
     """The spring on the spin about ``axis`` (3,) of the body whose dofs are
     ``start:start + 3 n``, its nodes at ``coordinates`` (n, 3) (m), Young's modulus ``E``
     (Pa), element size ``h`` (m) and ``stiffness`` ``s`` (the spring per node over ``E h``;
-    module docstring). An item of the system
-    (:mod:`cgfem.solve.items`): :meth:`add` adds its residual and returns its tangent's
-    entries (constant: built once)."""
+    module docstring). An item of the system (:mod:`cgfem.solve.items`): :meth:`add` adds its
+    residual and returns its tangent's entries (constant: built once)."""
 
     def __init__(self, name: str, start: int, coordinates: np.ndarray, axis, E: float, h: float,
                  stiffness: float = DEFAULT_POLICY.spin_stiffness):
