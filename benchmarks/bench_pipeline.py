@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import os
 import re
 import subprocess
@@ -31,6 +30,8 @@ import time
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
+
+from cgfem.results import write_json_atomic
 
 REPO = Path(__file__).resolve().parents[1]
 #: the probe: one run alone on one thread
@@ -110,41 +111,51 @@ def group(name: str) -> str:
 
 def probe(repeats: int = 2) -> float:
     """The probe's wall time (s), best of ``repeats`` runs, each ``cgfem run`` in a process of
-    its own on one thread (numba, OpenMP, MKL)."""
+    its own on one thread (numba, OpenMP, MKL, as the pipeline's jobs). ``RuntimeError`` with
+    the run's last line of stderr if it fails."""
     env = dict(os.environ, NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
     best = float("inf")
     with tempfile.TemporaryDirectory() as tmp:
         for _ in range(repeats):
             tic = time.perf_counter()
-            subprocess.run([sys.executable, "-m", "cgfem", "run", *PROBE, "--out", str(Path(tmp) / "probe")],
-                           cwd=REPO, env=env, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            proc = subprocess.run([sys.executable, "-m", "cgfem", "run", *PROBE, "--out", str(Path(tmp) / "probe"),
+                                   "--quiet"], cwd=REPO, env=env, capture_output=True, text=True)
+            if proc.returncode != 0:
+                raise RuntimeError(f"the probe run failed ({proc.returncode}): "
+                                   f"{(proc.stderr.strip().splitlines() or [''])[-1]}")
             best = min(best, time.perf_counter() - tic)
     return best
 
 
-def report(root: Path, log: Path, cores: int, probe_s: float | None, target_min: float) -> dict:
-    """The figures of the run in ``root`` whose snakemake log is ``log`` (module docstring)."""
+def report(root: Path, log: Path, cores: int) -> dict:
+    """The figures of the run in ``root`` whose snakemake log is ``log`` (module docstring);
+    ``ValueError`` if the log has no elapsed time or there are no run benchmark files."""
     elapsed, jobs = parse_log(log.read_text())
     runs = run_times(root / "results" / "benchmarks" / "runs")
     if elapsed is None:
-        raise SystemExit(f"{log}: no elapsed time (the run did not finish)")
+        raise ValueError(f"{log}: no elapsed time (the run did not finish)")
     if not runs:
-        raise SystemExit(f"{root / 'results/benchmarks/runs'}: no run benchmark files")
+        raise ValueError(f"{root / 'results/benchmarks/runs'}: no run benchmark files")
     groups: dict[str, float] = {}
     for name, seconds in runs.items():
-        groups[group(name)] = groups.get(group(name), 0.0) + seconds
+        key = group(name)
+        groups[key] = groups.get(key, 0.0) + seconds
     others = sum(j.seconds or 0.0 for j in jobs if not j.rule.startswith("run_case"))
     total = sum(runs.values()) + others
-    busy = total / (cores * elapsed)
-    out = {"log": str(log), "wall_s": elapsed, "jobs": len(jobs), "runs": len(runs),
-           "run_s": sum(runs.values()), "groups_s": groups, "other_jobs_s": others, "job_s": total,
-           "cores": cores, "busy": busy, "longest": sorted(runs.items(), key=lambda kv: -kv[1])[:6]}
-    if probe_s is not None:
-        allowed = target_min * 60.0 * cores * busy
-        out.update(probe_s=probe_s, job_probes=total / probe_s, target_min=target_min,
-                   allowed_job_s=allowed, allowed_job_probes=allowed / probe_s,
-                   probe_at_target_s=probe_s * allowed / total)
-    return out
+    return {"log": str(log), "wall_s": elapsed, "jobs": len(jobs), "runs": len(runs),
+            "run_s": sum(runs.values()), "groups_s": groups, "other_jobs_s": others, "job_s": total,
+            "cores": cores, "busy": total / (cores * elapsed),
+            "longest": sorted(runs.items(), key=lambda kv: -kv[1])[:6]}
+
+
+def projection(out: dict, probe_s: float, target_min: float) -> dict:
+    """The figures of :func:`report` ``out`` against a probe of ``probe_s`` (s): the job time
+    in probes, the job time a wall time of ``target_min`` allows at the same use of the cores
+    (s and probes), and the probe time at which this work takes that wall time."""
+    allowed = target_min * 60.0 * out["cores"] * out["busy"]
+    return {"probe_s": probe_s, "job_probes": out["job_s"] / probe_s, "target_min": target_min,
+            "allowed_job_s": allowed, "allowed_job_probes": allowed / probe_s,
+            "probe_at_target_s": probe_s * allowed / out["job_s"]}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -157,22 +168,28 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", type=Path)
     args = parser.parse_args(argv)
     log = args.log or max((args.root / ".snakemake" / "log").glob("*.snakemake.log"), default=None)
-    if log is None:
-        raise SystemExit(f"{args.root}: no snakemake log under .snakemake/log")
-    out = report(args.root, log, args.cores, probe() if args.probe else None, args.target)
+    try:
+        if log is None:
+            raise ValueError(f"{args.root}: no snakemake log under .snakemake/log")
+        out = report(args.root, log, args.cores)       # checked before the probe's minute
+        if args.probe:
+            out.update(projection(out, probe(), args.target))
+    except (ValueError, RuntimeError, OSError) as err:
+        print(f"bench_pipeline: {err}", file=sys.stderr)
+        return 2
     print(f"{out['log']}: wall {out['wall_s'] / 60:.2f} min, {out['jobs']} jobs ({out['runs']} runs)")
-    print(f"job time {out['job_s']:.0f} s = {out['job_s'] / 60:.1f} job-min: runs {out['run_s']:.0f} s ("
-          + ", ".join(f"{k} {v:.0f} s" for k, v in sorted(out["groups_s"].items()))
-          + f"), other jobs {out['other_jobs_s']:.0f} s; cores busy {100 * out['busy']:.0f} % of {out['cores']}")
+    groups = ", ".join(f"{k} {v:.0f} s" for k, v in sorted(out["groups_s"].items()))
+    print(f"job time {out['job_s']:.0f} s = {out['job_s'] / 60:.1f} job-min: runs {out['run_s']:.0f} s ({groups}), "
+          f"other jobs {out['other_jobs_s']:.0f} s; cores busy {100 * out['busy']:.0f} % of {out['cores']}")
     print("longest: " + ", ".join(f"{name} {s:.0f} s" for name, s in out["longest"]))
     if "probe_s" in out:
         print(f"probe (chain2_steel L1 nurbs_fe alone, one thread): {out['probe_s']:.2f} s; "
               f"job time {out['job_probes']:.0f} probes")
         print(f"{out['target_min']:g} min of wall time at {100 * out['busy']:.0f} % busy allows "
-              f"{out['allowed_job_s']:.0f} s of jobs = {out['allowed_job_probes']:.0f} probes here: this work "
-              f"fits where the probe takes at most {out['probe_at_target_s']:.2f} s")
+              f"{out['allowed_job_s']:.0f} s of jobs = {out['allowed_job_probes']:.0f} probes here: "
+              f"this work fits where the probe takes at most {out['probe_at_target_s']:.2f} s")
     if args.json:
-        args.json.write_text(json.dumps(out, indent=1))
+        write_json_atomic(args.json, out)
     return 0
 
 

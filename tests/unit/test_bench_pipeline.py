@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from benchmarks.bench_pipeline import group, parse_log, report, run_times
+from benchmarks.bench_pipeline import group, main, parse_log, projection, report, run_times
 
 LOG = """\
 Select jobs to execute...
@@ -65,10 +65,30 @@ def test_the_report_adds_the_runs_and_the_other_jobs(tmp_path):
     assert run_times(runs.parent) == {"chain3/L0_facets_o2": 129.25, "chain3/L2_facets": 40.5}
     log = tmp_path / "x.snakemake.log"
     log.write_text(LOG)
-    out = report(tmp_path, log, cores=2, probe_s=10.0, target_min=1.0)
+    out = report(tmp_path, log, cores=2)
     # the run job's own file, not the log's second-resolution span, plus check_case and all
     assert out["job_s"] == pytest.approx(129.25 + 40.5 + 4.0)
     assert out["groups_s"] == {"order 2": 129.25, "levels 2+": 40.5}
     assert out["busy"] == pytest.approx(out["job_s"] / (2 * 132.5))
-    assert out["allowed_job_s"] == pytest.approx(60.0 * 2 * out["busy"])
-    assert out["probe_at_target_s"] == pytest.approx(10.0 * out["allowed_job_s"] / out["job_s"])
+    # at the same use of the cores, a wall time equal to this run's allows exactly its job time,
+    # and this work then fits where the probe takes what it took here
+    same = projection(out, probe_s=10.0, target_min=132.5 / 60.0)
+    assert same["allowed_job_s"] == pytest.approx(out["job_s"])
+    assert same["probe_at_target_s"] == pytest.approx(10.0)
+    half = projection(out, probe_s=10.0, target_min=132.5 / 120.0)
+    assert half["probe_at_target_s"] == pytest.approx(5.0)
+    assert half["job_probes"] == pytest.approx(out["job_s"] / 10.0)
+
+
+def test_an_unfinished_run_is_an_error_naming_the_log(tmp_path, capsys, monkeypatch):
+    import benchmarks.bench_pipeline as bench
+
+    def no_probe():
+        raise AssertionError("the probe ran before the log was checked")
+    monkeypatch.setattr(bench, "probe", no_probe)
+    (tmp_path / ".snakemake" / "log").mkdir(parents=True)
+    log = tmp_path / ".snakemake" / "log" / "x.snakemake.log"
+    log.write_text(LOG.split("Complete log(s)")[0])
+    assert main(["--root", str(tmp_path), "--probe"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no elapsed time" in err[0] and str(log) in err[0]

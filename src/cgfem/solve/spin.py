@@ -20,9 +20,10 @@ perpendicular axis gives 0. The stiffness ``k = s E h sum |r_perp|^2`` (N m/rad)
 a spring of ``s`` times the grid's nodal stiffness ``E h`` on each of those nodes (``s``: the
 policy's ``spin_stiffness``), ``r_perp`` its distance to the axis: at the default ``s`` over a
 hundred times the spin's spurious ``2 F a`` on chain3, and a hundredth of the bulk's entries,
-so that the spin can still give a little where the discrete contact forces push it. The spring's moment ``k theta`` is what holding the spin takes; on a
-surface of revolution about the axis the contact forces have no moment about it, so the
-moment is what the discretization breaks of that symmetry (reported per step in the summary).
+so that the spin can still give a little where the discrete contact forces push it. The
+spring's moment ``k theta`` is what holding the spin takes; on a surface of revolution about
+the axis the contact forces have no moment about it, so the moment is what the
+discretization breaks of that symmetry (reported per step in the summary).
 """
 
 from __future__ import annotations
