@@ -28,6 +28,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from cgfem import __version__
+from cgfem._allocator import keep_freed_memory
 from cgfem.definitions import NAMES as SURFACES
 from cgfem.errors import InputError, RunInterrupted
 
@@ -168,6 +169,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     from cgfem.solve.policy import policy_with
 
+    keep_freed_memory()
     case = load_case(args.case)
     try:
         policy = policy_with(args.policy)
@@ -207,6 +209,7 @@ def _cmd_warmup(args: argparse.Namespace) -> int:
 
     from cgfem.warmup import warm_up
 
+    keep_freed_memory()
     start = time.perf_counter()
 
     def log(message: str) -> None:

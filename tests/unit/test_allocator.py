@@ -1,0 +1,66 @@
+"""The allocator setting of ``cgfem run``: large arrays come from the heap and freed ones stay.
+
+Each check runs in a child interpreter, whose allocator nothing else has configured: glibc's
+``mallinfo2`` (2.33 and later) tells the bytes held in mappings of their own (``hblkhd``) from
+the heap's (``arena``) and the heap's free bytes (``fordblks``).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import platform
+import subprocess
+import sys
+
+import pytest
+
+CHILD = r"""
+import ctypes, ctypes.util, json, sys
+import numpy as np
+from cgfem._allocator import keep_freed_memory
+
+class MallInfo2(ctypes.Structure):
+    _fields_ = [(name, ctypes.c_size_t) for name in
+                ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks",
+                 "fordblks", "keepcost")]
+
+libc = ctypes.CDLL(ctypes.util.find_library("c"))
+libc.mallinfo2.restype = MallInfo2
+kept = keep_freed_memory() if sys.argv[1] == "keep" else None
+size = 64 * 2**20
+a = np.ones(size // 8)
+held = libc.mallinfo2()
+del a
+freed = libc.mallinfo2()
+b = np.ones(size // 8)
+again = libc.mallinfo2()
+print(json.dumps({"kept": kept, "mapped": held.hblkhd, "heap_free_after": freed.fordblks,
+                  "heap_after_again": again.arena, "heap_before_again": freed.arena}))
+"""
+
+
+def _glibc_with_mallinfo2() -> bool:
+    if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
+        return False
+    return hasattr(ctypes.CDLL(ctypes.util.find_library("c")), "mallinfo2")
+
+
+def _child(mode: str) -> dict:
+    import json
+
+    out = subprocess.run([sys.executable, "-c", CHILD, mode], capture_output=True, text=True, check=True)
+    return json.loads(out.stdout)
+
+
+@pytest.mark.skipif(not _glibc_with_mallinfo2(), reason="glibc 2.33 or later only (mallinfo2)")
+def test_a_freed_large_array_is_kept_for_the_next():
+    size = 64 * 2**20
+    default = _child("default")
+    assert default["mapped"] >= size            # glibc's own: a mapping of its own, unmapped when freed
+    kept = _child("keep")
+    assert kept["kept"] is True
+    assert kept["mapped"] < size                # from the heap
+    assert kept["heap_free_after"] >= size      # freed, still the process's
+    # the next array of that size is served from it: the heap does not grow again
+    assert kept["heap_after_again"] - kept["heap_before_again"] < size // 2
