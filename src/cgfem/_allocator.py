@@ -12,8 +12,10 @@ re-faulting them was a fifth of planar's level-3 run (docs/performance.md, "Free
 :func:`keep_freed_memory` makes glibc serve every allocation from the process's heap
 (``M_MMAP_MAX = 0``) and give the heap's free top back to the kernel only beyond 2 GiB
 (``M_TRIM_THRESHOLD``), so that freed blocks serve the next allocations. Arithmetic is not
-touched (the same bits); the peak resident memory grows by what the heap's free blocks
-hold, measured 3-8 %. ``cgfem run`` and ``cgfem warmup`` call it; a library user may.
+touched (the same bits); the peak resident memory grows by the free blocks the heap holds
+between larger ones, 3-25 % as measured. ``cgfem warmup`` calls it, ``cgfem run`` where the
+run's memory estimate leaves room for that (:func:`cgfem.run.build_bodies`); a library user
+may.
 """
 
 from __future__ import annotations

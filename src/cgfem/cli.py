@@ -169,7 +169,6 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     from cgfem.solve.policy import policy_with
 
-    keep_freed_memory()
     case = load_case(args.case)
     try:
         policy = policy_with(args.policy)
@@ -193,7 +192,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         status = run_case(case, args.level, args.surface, args.out, log, args.order, policy=policy,
-                          memory_check=args.memory_check)
+                          memory_check=args.memory_check, keep_memory=True)
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)

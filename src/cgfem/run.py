@@ -20,6 +20,7 @@ import numba
 import numpy as np
 
 from cgfem import __version__
+from cgfem._allocator import keep_freed_memory
 from cgfem.case.model import Body, Case
 from cgfem.embedding.quadrature import Embedding, embed, grid_for
 from cgfem.embedding.tessellate import Tessellation, boundary_tessellation, keep_vertices
@@ -88,6 +89,11 @@ DIRECT_FIT_MEMORY = 1.25
 #: what every run holds besides its grids and systems: the interpreter, numpy, scipy, numba
 #: and MKL (about 0.3-0.4 GiB), added by :func:`run_memory`
 BASE_MEMORY = 512 * 2**20
+#: the largest share of the machine's memory a run may be estimated to need and still keep the
+#: memory it frees (:func:`build_bodies`): kept memory raised the peaks 3-30 %
+#: (docs/performance.md, "Freed memory kept"), which neither a run near the machine's memory
+#: nor one whose estimate is tight (chain3 at level 3 peaks at 0.87 of it) can take
+KEEP_MEMORY_SHARE = 0.4
 
 
 #: the environment variables that set the thread counts of numba, OpenMP, MKL and OpenBLAS
@@ -231,11 +237,16 @@ def build_models(case: Case, level: int, surface: str, log: Callable[[str], None
 
 
 def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None], order: int = 1,
-                 policy: SolverPolicy = DEFAULT_POLICY, memory_check: bool = True) -> tuple[list, dict, dict]:
+                 policy: SolverPolicy = DEFAULT_POLICY, memory_check: bool = True,
+                 keep_memory: bool = False) -> tuple[list, dict, dict]:
     """Embed and discretize every body with the element of ``order``: the models, per-body
     measures and the solids. A level whose memory estimate exceeds the machine's is refused
     first (:func:`check_memory`; ``policy`` decides whether its systems take the Krylov path)
-    unless ``memory_check`` is False."""
+    unless ``memory_check`` is False. ``keep_memory``: where the run's estimate
+    (:func:`run_memory`) is at most :data:`KEEP_MEMORY_SHARE` of the machine's memory, the
+    process keeps the memory it frees for its later arrays
+    (:func:`~cgfem._allocator.keep_freed_memory`: faster where freed pages are slow to get
+    back, at a higher peak)."""
     for i, spec in enumerate(case.contact):
         if spec.rule == "segmented" and not surface_definition(surface).exact_surface:
             raise InputError(f"contact[{i}].rule", "'segmented' needs a NURBS surface definition "
@@ -244,6 +255,10 @@ def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None
     brep = {name: boundary_measures(solid) for name, solid in solids.items()}
     if memory_check:
         check_memory(case, level, brep, order=order, surface=surface, policy=policy)
+    if keep_memory:
+        need, have = run_memory(case, level, surface, order, policy, brep), machine_memory()
+        if need <= KEEP_MEMORY_SHARE * have and keep_freed_memory():
+            log(f"memory: freed blocks kept for reuse (estimate {_size(need)} of {_size(have)})")
     finite = case.kinematics == "finite"
     models, measures = [], {}
     for body in case.bodies:
@@ -379,11 +394,13 @@ def _remove_created(created: list[Path]) -> None:
 
 def run_case(case: Case, level: int, surface: str, out: Path,
              log: Callable[[str], None] = lambda m: None, order: int = 1,
-             policy: SolverPolicy = DEFAULT_POLICY, memory_check: bool = True) -> RunStatus:
+             policy: SolverPolicy = DEFAULT_POLICY, memory_check: bool = True,
+             keep_memory: bool = False) -> RunStatus:
     """Solve ``case`` with the hexahedra of ``order`` (1 or 2) and write its results to ``out``;
     ``policy``: the solver's tuning (:class:`~cgfem.solve.policy.SolverPolicy`);
     ``memory_check``: refuse a level whose memory estimate exceeds the machine's
-    (:func:`check_memory`).
+    (:func:`check_memory`); ``keep_memory``: let the process keep the memory it frees where
+    the estimate leaves room (:func:`build_bodies`; ``cgfem run`` does).
 
     Returns the run status (``converged``, ``outer_not_converged`` or ``failed``, see
     :mod:`cgfem.solve.static`; :data:`INTERRUPTED` when ``log`` raised
@@ -404,7 +421,8 @@ def run_case(case: Case, level: int, surface: str, out: Path,
     created = check_out(out)
     started = time.perf_counter()
     try:
-        models, measures, solids = build_bodies(case, level, surface, log, order, policy, memory_check)
+        models, measures, solids = build_bodies(case, level, surface, log, order, policy, memory_check,
+                                                keep_memory)
         try:
             out.mkdir(parents=True, exist_ok=True)
         except OSError as err:

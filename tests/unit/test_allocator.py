@@ -64,3 +64,23 @@ def test_a_freed_large_array_is_kept_for_the_next():
     assert kept["heap_free_after"] >= size      # freed, still the process's
     # the next array of that size is served from it: the heap does not grow again
     assert kept["heap_after_again"] - kept["heap_before_again"] < size // 2
+
+
+@pytest.mark.parametrize("fraction, kept", [(0.98, True), (1.02, False)])
+def test_a_run_keeps_freed_memory_only_where_its_estimate_leaves_room(monkeypatch, fraction, kept):
+    """``cgfem run`` (``build_bodies(..., keep_memory=True)``) keeps freed memory where the
+    run's estimate is at most KEEP_MEMORY_SHARE of the machine's memory, and says so."""
+    import cgfem.run as run
+    from cgfem.case.load import load_case
+    from tests.support.paths import CASES
+
+    case = load_case(CASES / "planar.yaml")
+    need = run.run_memory(case, 0, "facets")
+    calls: list[bool] = []
+    monkeypatch.setattr(run, "keep_freed_memory", lambda: calls.append(True) or True)
+    # a machine on which the estimate is ``fraction`` of KEEP_MEMORY_SHARE of its memory
+    monkeypatch.setattr(run, "machine_memory", lambda: int(need / (run.KEEP_MEMORY_SHARE * fraction)))
+    lines: list[str] = []
+    run.build_bodies(case, 0, "facets", lines.append, memory_check=False, keep_memory=True)
+    assert bool(calls) == kept
+    assert any(line.startswith("memory: freed blocks kept") for line in lines) == kept
