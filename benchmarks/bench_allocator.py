@@ -7,9 +7,10 @@
    :func:`~cgfem._allocator.keep_freed_memory` (the block kept in the heap). The first fill is
    printed too: memory the process never had, what every run pays once for its peak.
 2. **A run** (default planar at level 3 with ``nurbs_fe``, one thread, the two variants one
-   after the other): ``cgfem run``'s wall time and peak resident memory with the allocator it
-   sets and with glibc's default, their ratio, and whether the two summaries are the same bits
-   (``timings``, ``versions``, ``threads`` and the steps' seconds left out).
+   after the other): ``cgfem run``'s wall time and peak resident memory with freed memory
+   kept (whatever the run's memory estimate, ``cgfem.run.KEEP_MEMORY_SHARE``) and with glibc's
+   default, their ratio, and whether the two summaries are the same bits (``timings``,
+   ``versions``, ``threads`` and the steps' seconds left out).
 
     python3 -m benchmarks.bench_allocator [--mb 600] [--wait 8] [--case config/cases/planar.yaml]
         [--level 3] [--surface nurbs_fe] [--order 1] [--no-run] [--json out.json]
@@ -52,14 +53,20 @@ for k in range(2):
 print(json.dumps(rates))
 """
 
-#: the run child: ``cgfem run`` with glibc's default allocator (``keep_freed_memory`` made a no-op)
-DEFAULT_ALLOCATOR_RUN = r"""
+#: the run child: ``cgfem run`` with freed memory kept whatever its estimate (argv[1] "kept") or
+#: with glibc's default allocator ("default")
+RUN = r"""
 import sys
-import cgfem._allocator
-cgfem._allocator.keep_freed_memory = lambda: False
+import cgfem.run
+if sys.argv[1] == "kept":
+    cgfem.run.KEEP_MEMORY_SHARE = float("inf")
+else:
+    cgfem.run.keep_freed_memory = lambda: False
 from cgfem.cli import main
-sys.exit(main(sys.argv[1:]))
+sys.exit(main(sys.argv[2:]))
 """
+#: the line ``cgfem run`` logs when it keeps freed memory
+KEPT_LINE = "memory: freed blocks kept"
 
 
 def refault(mode: str, mib: int, wait: float) -> tuple[float, float]:
@@ -70,19 +77,20 @@ def refault(mode: str, mib: int, wait: float) -> tuple[float, float]:
     return first, second
 
 
-def timed_child(argv: list[str]) -> tuple[float, float, int]:
-    """(wall s, peak resident memory GB, exit code) of a child process on one thread."""
+def timed_child(argv: list[str], log: Path) -> tuple[float, float]:
+    """(wall s, peak resident memory GB) of a child process on one thread, its stderr written
+    to ``log``; ``RuntimeError`` with its last line if it fails."""
     tic = time.perf_counter()
-    proc = subprocess.Popen(argv, cwd=REPO, env=dict(os.environ, **ONE_THREAD), stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True)
-    _, status, usage = os.wait4(proc.pid, 0)
+    with open(log, "w") as err:
+        proc = subprocess.Popen(argv, cwd=REPO, env=dict(os.environ, **ONE_THREAD), stdout=subprocess.DEVNULL,
+                                stderr=err)
+        _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - tic
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    if proc.returncode != 0:
-        tail = (proc.stderr.read().strip().splitlines() or [""])[-1]
-        raise RuntimeError(f"{' '.join(argv[-8:])} failed ({proc.returncode}): {tail}")
-    proc.stderr.close()
-    return wall, usage.ru_maxrss * 1024 / 1e9, proc.returncode
+    code = os.waitstatus_to_exitcode(status)
+    if code != 0:
+        tail = (log.read_text().strip().splitlines() or [""])[-1]
+        raise RuntimeError(f"{' '.join(argv[-8:])} failed ({code}): {tail}")
+    return wall, usage.ru_maxrss * 1024 / 1e9
 
 
 def comparable(summary: dict) -> dict:
@@ -99,14 +107,15 @@ def comparable(summary: dict) -> dict:
 
 def run_pair(case: str, level: int, surface: str, order: int) -> dict:
     """The run with the allocator ``cgfem run`` sets and with glibc's default (module docstring)."""
-    args = ["run", case, "--level", str(level), "--surface", surface, "--order", str(order), "--quiet"]
+    args = ["run", case, "--level", str(level), "--surface", surface, "--order", str(order)]
     out: dict = {}
     with tempfile.TemporaryDirectory() as tmp:
         summaries = {}
-        for name, prefix in (("kept", [sys.executable, "-m", "cgfem"]),
-                             ("default", [sys.executable, "-c", DEFAULT_ALLOCATOR_RUN])):
-            folder = Path(tmp) / name
-            wall, peak, _ = timed_child(prefix + args + ["--out", str(folder)])
+        for name in ("kept", "default"):
+            folder, log = Path(tmp) / name, Path(tmp) / f"{name}.log"
+            wall, peak = timed_child([sys.executable, "-c", RUN, name] + args + ["--out", str(folder)], log)
+            if (KEPT_LINE in log.read_text()) != (name == "kept"):
+                raise RuntimeError(f"the {name} run's log {'lacks' if name == 'kept' else 'has'} {KEPT_LINE!r}")
             out[name] = {"wall_s": wall, "peak_gb": peak}
             summaries[name] = comparable(json.loads((folder / "summary.json").read_text()))
         out["same_bits"] = summaries["kept"] == summaries["default"]

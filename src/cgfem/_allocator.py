@@ -4,16 +4,16 @@ glibc serves every allocation above its mmap threshold (32 MiB at most) from a f
 and unmaps it when it is freed. The kernel takes those pages back, and a virtual machine that
 reports free pages to its host (virtio-balloon free page reporting) hands them back to the
 host within seconds, so the next array of that size is faulted in from the host page by
-page: on the machines this project is measured on, 0.4-1.5 GB/s against 5-7 GB/s for memory
-the process already holds. A Newton iteration at half a million unknowns allocates and frees
-several such arrays (the tangent, its merged contact couplings, the multigrid's work), and
-re-faulting them was a fifth of planar's level-3 run (docs/performance.md, "Freed memory").
+page, several times slower than memory the process already holds. A Newton iteration at half
+a million unknowns allocates and frees several such arrays (the tangent, its merged contact
+couplings, the multigrid's work; measurements in docs/performance.md, "Freed memory kept",
+and ``benchmarks/bench_allocator.py``).
 
 :func:`keep_freed_memory` makes glibc serve every allocation from the process's heap
 (``M_MMAP_MAX = 0``) and give the heap's free top back to the kernel only beyond 2 GiB
 (``M_TRIM_THRESHOLD``), so that freed blocks serve the next allocations. Arithmetic is not
 touched (the same bits); the peak resident memory grows by the free blocks the heap holds
-between larger ones, 3-25 % as measured. ``cgfem warmup`` calls it, ``cgfem run`` where the
+between larger ones, 3-30 % as measured. ``cgfem warmup`` calls it, ``cgfem run`` where the
 run's memory estimate leaves room for that (:func:`cgfem.run.build_bodies`); a library user
 may.
 """
