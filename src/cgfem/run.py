@@ -128,6 +128,32 @@ def machine_memory() -> int:
     return 16 * 2**30
 
 
+def cgroup_memory_limit(cgroups: Path = Path("/proc/self/cgroup"),
+                        root: Path = Path("/sys/fs/cgroup")) -> int | None:
+    """Bytes this process's memory control group allows (cgroup v2 ``memory.max``, v1
+    ``memory.limit_in_bytes`` of the group ``cgroups`` names, under ``root``), None if there
+    is no limit or none can be read (a cluster job's limit is what it requested)."""
+    try:
+        lines = cgroups.read_text().splitlines()
+    except OSError:
+        return None
+    for line in lines:
+        _, controllers, path = line.split(":", 2)
+        if controllers == "":
+            limit = root / path.lstrip("/") / "memory.max"
+        elif "memory" in controllers.split(","):
+            limit = root / "memory" / path.lstrip("/") / "memory.limit_in_bytes"
+        else:
+            continue
+        try:
+            text = limit.read_text().strip()
+        except OSError:
+            continue
+        if text.isdigit() and int(text) < 2**60:
+            return int(text)
+    return None
+
+
 def estimate_memory(case: Case, level: int, measures: dict[str, BoundaryMeasures], order: int = 1,
                     surface: str = "nurbs_fe", policy: SolverPolicy = DEFAULT_POLICY) -> tuple[int, int, bool]:
     """Estimated bytes and DOFs of ``case`` at ``level`` with elements of ``order`` from the
@@ -243,7 +269,8 @@ def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None
     measures and the solids. A level whose memory estimate exceeds the machine's is refused
     first (:func:`check_memory`; ``policy`` decides whether its systems take the Krylov path)
     unless ``memory_check`` is False. ``keep_memory``: where the run's estimate
-    (:func:`run_memory`) is at most :data:`KEEP_MEMORY_SHARE` of the machine's memory, the
+    (:func:`run_memory`) is at most :data:`KEEP_MEMORY_SHARE` of the machine's memory (or of
+    the process's control group's limit, :func:`cgroup_memory_limit`, if smaller), the
     process keeps the memory it frees for its later arrays
     (:func:`~cgfem._allocator.keep_freed_memory`: faster where freed pages are slow to get
     back, at a higher peak)."""
@@ -256,7 +283,8 @@ def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None
     if memory_check:
         check_memory(case, level, brep, order=order, surface=surface, policy=policy)
     if keep_memory:
-        need, have = run_memory(case, level, surface, order, policy, brep), machine_memory()
+        need = run_memory(case, level, surface, order, policy, brep)
+        have = min(machine_memory(), cgroup_memory_limit() or machine_memory())
         if need <= KEEP_MEMORY_SHARE * have and keep_freed_memory():
             log(f"memory: freed blocks kept for reuse (estimate {_size(need)} of {_size(have)})")
     finite = case.kinematics == "finite"

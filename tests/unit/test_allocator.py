@@ -80,7 +80,44 @@ def test_a_run_keeps_freed_memory_only_where_its_estimate_leaves_room(monkeypatc
     monkeypatch.setattr(run, "keep_freed_memory", lambda: calls.append(True) or True)
     # a machine on which the estimate is ``fraction`` of KEEP_MEMORY_SHARE of its memory
     monkeypatch.setattr(run, "machine_memory", lambda: int(need / (run.KEEP_MEMORY_SHARE * fraction)))
+    monkeypatch.setattr(run, "cgroup_memory_limit", lambda: None)
     lines: list[str] = []
     run.build_bodies(case, 0, "facets", lines.append, memory_check=False, keep_memory=True)
     assert bool(calls) == kept
     assert any(line.startswith("memory: freed blocks kept") for line in lines) == kept
+
+
+def test_a_control_groups_limit_counts_as_the_machines_memory(monkeypatch):
+    """Under a memory limit (a cluster job's request) the share is taken of the limit: a run
+    reserving its estimate there does not keep freed memory."""
+    import cgfem.run as run
+    from cgfem.case.load import load_case
+    from tests.support.paths import CASES
+
+    case = load_case(CASES / "planar.yaml")
+    need = run.run_memory(case, 0, "facets")
+    calls: list[bool] = []
+    monkeypatch.setattr(run, "keep_freed_memory", lambda: calls.append(True) or True)
+    monkeypatch.setattr(run, "machine_memory", lambda: 100 * need)
+    monkeypatch.setattr(run, "cgroup_memory_limit", lambda: need)
+    run.build_bodies(case, 0, "facets", lambda line: None, memory_check=False, keep_memory=True)
+    assert not calls
+
+
+@pytest.mark.parametrize("version", [1, 2])
+def test_the_control_groups_limit_is_read_from_the_groups_own_folder(tmp_path, version):
+    from cgfem.run import cgroup_memory_limit
+
+    cgroups = tmp_path / "cgroup"
+    if version == 2:
+        cgroups.write_text("0::/slurm/job_7/step_0\n")
+        folder, name = tmp_path / "slurm/job_7/step_0", "memory.max"
+    else:
+        cgroups.write_text("9:cpu,cpuacct:/slurm/job_7\n4:memory:/slurm/job_7\n")
+        folder, name = tmp_path / "memory/slurm/job_7", "memory.limit_in_bytes"
+    folder.mkdir(parents=True)
+    (folder / name).write_text("4294967296\n")
+    assert cgroup_memory_limit(cgroups, tmp_path) == 4 * 2**30
+    (folder / name).write_text("max\n" if version == 2 else "9223372036854771712\n")   # no limit
+    assert cgroup_memory_limit(cgroups, tmp_path) is None
+    assert cgroup_memory_limit(tmp_path / "none", tmp_path) is None
