@@ -9,8 +9,8 @@
 2. **A run** (default planar at level 3 with ``nurbs_fe``, one thread, the two variants one
    after the other): ``cgfem run``'s wall time and peak resident memory with freed memory
    kept (whatever the run's memory estimate, ``cgfem.run.KEEP_MEMORY_SHARE``) and with glibc's
-   default, their ratio, and whether the two summaries are the same bits (``timings``,
-   ``versions``, ``threads`` and the steps' seconds left out).
+   default, their ratio, and whether the two summaries are the same bits
+   (:func:`cgfem.results.stable`).
 
     python3 -m benchmarks.bench_allocator [--mb 600] [--wait 8] [--case config/cases/planar.yaml]
         [--level 3] [--surface nurbs_fe] [--order 1] [--no-run] [--json out.json]
@@ -27,10 +27,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from cgfem.results import write_json_atomic
+from cgfem.results import stable, write_json_atomic
+from cgfem.run import KEPT_MEMORY_LOG, THREAD_COUNTS
 
 REPO = Path(__file__).resolve().parents[1]
-ONE_THREAD = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 #: the refault child: argv mode ("default" or "keep"), MiB, wait (s); prints both fills' GB/s
 REFAULT = r"""
@@ -65,8 +65,6 @@ else:
 from cgfem.cli import main
 sys.exit(main(sys.argv[2:]))
 """
-#: the line ``cgfem run`` logs when it keeps freed memory
-KEPT_LINE = "memory: freed blocks kept"
 
 
 def refault(mode: str, mib: int, wait: float) -> tuple[float, float]:
@@ -82,8 +80,8 @@ def timed_child(argv: list[str], log: Path) -> tuple[float, float]:
     to ``log``; ``RuntimeError`` with its last line if it fails."""
     tic = time.perf_counter()
     with open(log, "w") as err:
-        proc = subprocess.Popen(argv, cwd=REPO, env=dict(os.environ, **ONE_THREAD), stdout=subprocess.DEVNULL,
-                                stderr=err)
+        proc = subprocess.Popen(argv, cwd=REPO, env=dict(os.environ, **dict.fromkeys(THREAD_COUNTS, "1")),
+                                stdout=subprocess.DEVNULL, stderr=err)
         _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - tic
     code = os.waitstatus_to_exitcode(status)
@@ -91,18 +89,6 @@ def timed_child(argv: list[str], log: Path) -> tuple[float, float]:
         tail = (log.read_text().strip().splitlines() or [""])[-1]
         raise RuntimeError(f"{' '.join(argv[-8:])} failed ({code}): {tail}")
     return wall, usage.ru_maxrss * 1024 / 1e9
-
-
-def comparable(summary: dict) -> dict:
-    """A summary without what differs between identical runs (times, versions, threads)."""
-    def strip(value):
-        if isinstance(value, dict):
-            return {k: strip(v) for k, v in value.items()
-                    if k not in ("timings", "versions", "threads") and "second" not in k}
-        if isinstance(value, list):
-            return [strip(v) for v in value]
-        return value
-    return strip(summary)
 
 
 def run_pair(case: str, level: int, surface: str, order: int) -> dict:
@@ -114,10 +100,11 @@ def run_pair(case: str, level: int, surface: str, order: int) -> dict:
         for name in ("kept", "default"):
             folder, log = Path(tmp) / name, Path(tmp) / f"{name}.log"
             wall, peak = timed_child([sys.executable, "-c", RUN, name] + args + ["--out", str(folder)], log)
-            if (KEPT_LINE in log.read_text()) != (name == "kept"):
-                raise RuntimeError(f"the {name} run's log {'lacks' if name == 'kept' else 'has'} {KEPT_LINE!r}")
+            if (KEPT_MEMORY_LOG in log.read_text()) != (name == "kept"):
+                raise RuntimeError(f"the {name} run's log {'lacks' if name == 'kept' else 'has'} "
+                                   f"{KEPT_MEMORY_LOG!r}")
             out[name] = {"wall_s": wall, "peak_gb": peak}
-            summaries[name] = comparable(json.loads((folder / "summary.json").read_text()))
+            summaries[name] = stable(json.loads((folder / "summary.json").read_text()))
         out["same_bits"] = summaries["kept"] == summaries["default"]
     out["speedup"] = out["default"]["wall_s"] / out["kept"]["wall_s"]
     out["peak_ratio"] = out["kept"]["peak_gb"] / out["default"]["peak_gb"]

@@ -98,7 +98,9 @@ def main(levels: list[int], parallel: bool = False, first_step: bool = False, ve
     rows = []
     env = None
     if parallel:
-        env = dict(os.environ, NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+        from cgfem.run import THREAD_COUNTS
+
+        env = dict(os.environ, **dict.fromkeys(THREAD_COUNTS, "1"))
     print(f"{'L':>2} {'surface':9} {'status':10} {'unknowns':>9} {'dofs':>8} {'nnz/unk':>8} {'LU/unk':>8} "
           f"{'newton':>6} {'solve s':>8} {'s/newton':>9} {'peak MiB':>9}", flush=True)
     for level in levels:

@@ -32,6 +32,7 @@ import numpy as np
 import yaml
 
 from cgfem.report.runs import Run
+from cgfem.run import THREAD_COUNTS
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = {"planar": "planar.yaml", "chain2_steel": "chain2_steel.yaml",
@@ -58,8 +59,7 @@ def run_one(case: dict, level: int, surface: str, folder: Path, threads: int, po
     of its summary."""
     case_file = folder / "case.yaml"
     case_file.write_text(yaml.safe_dump(case, sort_keys=False))
-    env = dict(os.environ, **{k: str(threads) for k in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS",
-                                                          "OPENBLAS_NUM_THREADS")})
+    env = dict(os.environ, **dict.fromkeys(THREAD_COUNTS, str(threads)))
     proc = subprocess.run([sys.executable, "-m", "cgfem", "run", str(case_file), "--level", str(level),
                            "--surface", surface, "--out", str(folder / "out"), "--quiet",
                            *(f"--policy={item}" for item in policy)],

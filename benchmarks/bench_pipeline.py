@@ -32,6 +32,7 @@ from datetime import datetime
 from pathlib import Path
 
 from cgfem.results import write_json_atomic
+from cgfem.run import THREAD_COUNTS
 
 REPO = Path(__file__).resolve().parents[1]
 #: the probe: one run alone on one thread
@@ -113,7 +114,7 @@ def probe(repeats: int = 2) -> float:
     """The probe's wall time (s), best of ``repeats`` runs, each ``cgfem run`` in a process of
     its own on one thread (numba, OpenMP, MKL, as the pipeline's jobs). ``RuntimeError`` with
     the run's last line of stderr if it fails."""
-    env = dict(os.environ, NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    env = dict(os.environ, **dict.fromkeys(THREAD_COUNTS, "1"))
     best = float("inf")
     with tempfile.TemporaryDirectory() as tmp:
         for _ in range(repeats):

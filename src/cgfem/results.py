@@ -32,6 +32,21 @@ def _jsonable(value):
     raise TypeError(f"not JSON serializable: {type(value).__name__}")
 
 
+#: the keys of ``summary.json`` whose values differ between runs of the same input on the same
+#: thread count: wall times (``timings``, each step's ``seconds``), the thread record, versions
+VOLATILE = frozenset({"timings", "seconds", "threads", "versions"})
+
+
+def stable(data):
+    """``data`` (a summary, or a part of one) without the :data:`VOLATILE` keys at any depth:
+    what two runs of the same input give bit for bit (tests/physics/test_determinism.py)."""
+    if isinstance(data, dict):
+        return {k: stable(v) for k, v in data.items() if k not in VOLATILE}
+    if isinstance(data, list):
+        return [stable(v) for v in data]
+    return data
+
+
 #: the files a converged step writes, ``{prefix}_NNN.vtu`` (``fit_NNN.json`` too)
 STEP_PREFIXES = ("step", "surface", "boundary", "contact", "fit")
 #: the files a run writes once: its summary and, with ``nurbs_fit``, the fits at rest

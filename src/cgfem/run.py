@@ -94,11 +94,14 @@ BASE_MEMORY = 512 * 2**20
 #: (docs/performance.md, "Freed memory kept"), which neither a run near the machine's memory
 #: nor one whose estimate is tight (chain3 at level 3 peaks at 0.87 of it) can take
 KEEP_MEMORY_SHARE = 0.4
+#: the start of the log line of a run that keeps the memory it frees
+KEPT_MEMORY_LOG = "memory: freed blocks kept for reuse"
 
 
 #: the environment variables that set the thread counts of numba, OpenMP, MKL and OpenBLAS
-THREAD_VARIABLES = ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS",
-                    "MKL_DYNAMIC", "MKL_CBWR")
+THREAD_COUNTS = ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+#: those and MKL's other thread settings, recorded in a run's summary
+THREAD_VARIABLES = THREAD_COUNTS + ("MKL_DYNAMIC", "MKL_CBWR")
 #: the status of a run stopped by a signal: its converged steps are written, and its summary
 #: says where it stopped
 INTERRUPTED = "interrupted"
@@ -117,15 +120,20 @@ class RunStatus:
 
 
 def machine_memory() -> int:
-    """Bytes of physical memory of this machine (``MemTotal``), or 16 GiB if unknown."""
+    """Bytes of memory this process may hold: the machine's physical memory (``MemTotal``, 16
+    GiB if unknown), or its control group's limit where that is smaller (a container's, a
+    cluster job's: :func:`cgroup_memory_limit`)."""
+    total = 16 * 2**30
     try:
         with open("/proc/meminfo") as f:
             for line in f:
                 if line.startswith("MemTotal:"):
-                    return int(line.split()[1]) * 1024
+                    total = int(line.split()[1]) * 1024
+                    break
     except OSError:
         pass
-    return 16 * 2**30
+    limit = cgroup_memory_limit()
+    return total if limit is None else min(total, limit)
 
 
 def cgroup_memory_limit(cgroups: Path = Path("/proc/self/cgroup"),
@@ -269,9 +277,8 @@ def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None
     measures and the solids. A level whose memory estimate exceeds the machine's is refused
     first (:func:`check_memory`; ``policy`` decides whether its systems take the Krylov path)
     unless ``memory_check`` is False. ``keep_memory``: where the run's estimate
-    (:func:`run_memory`) is at most :data:`KEEP_MEMORY_SHARE` of the machine's memory (or of
-    the process's control group's limit, :func:`cgroup_memory_limit`, if smaller), the
-    process keeps the memory it frees for its later arrays
+    (:func:`run_memory`) is at most :data:`KEEP_MEMORY_SHARE` of the memory the process may
+    hold (:func:`machine_memory`), the process keeps the memory it frees for its later arrays
     (:func:`~cgfem._allocator.keep_freed_memory`: faster where freed pages are slow to get
     back, at a higher peak)."""
     for i, spec in enumerate(case.contact):
@@ -283,10 +290,9 @@ def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None
     if memory_check:
         check_memory(case, level, brep, order=order, surface=surface, policy=policy)
     if keep_memory:
-        need = run_memory(case, level, surface, order, policy, brep)
-        have = min(machine_memory(), cgroup_memory_limit() or machine_memory())
+        need, have = run_memory(case, level, surface, order, policy, brep), machine_memory()
         if need <= KEEP_MEMORY_SHARE * have and keep_freed_memory():
-            log(f"memory: freed blocks kept for reuse (estimate {_size(need)} of {_size(have)})")
+            log(f"{KEPT_MEMORY_LOG} (estimate {_size(need)} of {_size(have)})")
     finite = case.kinematics == "finite"
     models, measures = [], {}
     for body in case.bodies:

@@ -20,6 +20,8 @@ import meshio
 import numpy as np
 import pytest
 
+from cgfem.results import stable
+from cgfem.run import THREAD_COUNTS
 from tests.support.paths import CASES
 
 #: every test here solves whole problems
@@ -31,13 +33,10 @@ RUNS = [pytest.param("smoke/chain2_steel.yaml", s, marks=pytest.mark.long, id=f"
         for s in ("facets", "nurbs_fe", "nurbs_fit")] \
     + [pytest.param("chain3.yaml", s, id=f"chain3-{s}", marks=pytest.mark.long if s == "nurbs_fit" else ())
        for s in ("facets", "nurbs_fe", "nurbs_fit")]
-#: what may differ between repeated runs: wall times and the thread record
-VOLATILE = {"timings", "seconds", "threads"}
 
 
 def start(case: str, surface: str, out: Path, threads: int) -> subprocess.Popen:
-    env = dict(os.environ, **{k: str(threads) for k in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS",
-                                                          "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")})
+    env = dict(os.environ, **dict.fromkeys(THREAD_COUNTS, str(threads)))
     return subprocess.Popen([sys.executable, "-m", "cgfem", "run", str(CASES / case), "--level", "0",
                              "--surface", surface, "--out", str(out), "--quiet"],
                             env=env, stderr=subprocess.PIPE, text=True)
@@ -47,15 +46,6 @@ def finish(proc: subprocess.Popen, out: Path) -> dict:
     err = proc.communicate(timeout=900)[1]
     assert proc.returncode == 0, err[-2000:]
     return json.loads((out / "summary.json").read_text())
-
-
-def stable(data):
-    """``data`` without the keys that may differ between repeated runs."""
-    if isinstance(data, dict):
-        return {k: stable(v) for k, v in data.items() if k not in VOLATILE}
-    if isinstance(data, list):
-        return [stable(v) for v in data]
-    return data
 
 
 def path(summary: dict) -> list[tuple]:
