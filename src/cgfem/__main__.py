@@ -1,5 +1,3 @@
-import sys
+from cgfem.cli import console
 
-from cgfem.cli import main
-
-sys.exit(main())
+console()

@@ -23,9 +23,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NoReturn
 
 from cgfem import __version__
 from cgfem._allocator import keep_freed_memory
@@ -278,5 +280,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_OK
 
 
+def console() -> NoReturn:
+    """The ``cgfem`` console script: :func:`main`, whose exit code the process ends with at
+    once, its output flushed. Every file a command writes is complete and closed when
+    :func:`main` returns (results are written atomically), so the interpreter's teardown
+    (freeing every module and array, a fixed cost of every pipeline job:
+    ``docs/performance.md``, "Per-process cost") is skipped."""
+    code = main()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (AttributeError, ValueError, OSError):   # closed, None or a broken pipe
+            pass
+    os._exit(code)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    console()

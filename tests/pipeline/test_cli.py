@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -141,6 +142,19 @@ def test_console_script_exit_code_and_no_traceback(tmp_path):
     assert "Traceback" not in proc.stderr
     assert proc.stderr.strip() == ("cgfem: error: bodies.ring.geometry.minor_radius: must be smaller "
                                    "than major_radius (0.03 >= 0.02)")
+
+
+def test_console_script_output_through_a_pipe_is_complete(tmp_path, capsys):
+    """The console script ends the process without the interpreter's teardown: what a
+    command printed into a pipe (block-buffered, so still in the buffer at the end) arrives
+    whole, with the exit code, as from :func:`main` in this process."""
+    path = _write(tmp_path, GOOD)
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
+    proc = subprocess.run([sys.executable, "-m", "cgfem", "check", path, "--json"], capture_output=True,
+                          text=True, env=env)
+    assert proc.returncode == 0, proc.stderr
+    assert main(["check", path, "--json"]) == 0
+    assert json.loads(proc.stdout) == json.loads(capsys.readouterr().out)
 
 
 def test_check_level_reports_grid_quadrature(tmp_path, capsys):
