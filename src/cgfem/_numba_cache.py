@@ -69,10 +69,12 @@ _IMPORT_LINE = re.compile(rb"^[ \t]*(?:from[ \t]+[.\w]+[ \t]+import[ \t]*(?:\([^
 def import_statements(source: bytes) -> ast.Module:
     """The import statements of a module's ``source``, as one parsed module: each line that
     starts like an import (:data:`_IMPORT_LINE`, wherever it is indented) parsed alone; a
-    line that does not parse is not an import (prose in a docstring). A kernel module's
-    stamp is computed in every process that imports it, and these lines parse far faster
-    than the whole module; they give what :func:`ast.walk` over the whole module gives
-    (checked for every module of the package in ``tests/unit/test_numba_cache.py``)."""
+    line that does not parse is not an import (prose in a docstring). Not followed: a
+    backslash continuation of an import, a second statement after ``;`` (the package
+    writes neither). A kernel module's stamp is computed in every process that imports it,
+    and these lines parse far faster than the whole module; they give what
+    :func:`ast.walk` over the whole module gives (checked for every module of the package
+    in ``tests/unit/test_numba_cache.py``)."""
     tree = ast.Module(body=[], type_ignores=[])
     for match in _IMPORT_LINE.finditer(source):
         try:
