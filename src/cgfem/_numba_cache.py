@@ -39,6 +39,7 @@ _FILE_LOCATORS = (caching.UserProvidedCacheLocator, caching.InTreeCacheLocator,
                   caching.UserWideCacheLocator)
 
 
+@functools.lru_cache(maxsize=None)
 def module_file(name: str) -> Path | None:
     """Source file of the ``cgfem`` module ``name`` (dotted), or ``None`` if it is none."""
     parts = name.split(".")
@@ -86,10 +87,16 @@ def import_statements(source: bytes) -> ast.Module:
 
 @functools.lru_cache(maxsize=None)
 def imported_modules(name: str) -> tuple[str, ...]:
-    """The ``cgfem`` modules that module ``name`` imports directly (sorted)."""
-    path = module_file(name)
-    tree = import_statements(path.read_bytes())
-    is_package = path.name == "__init__.py"
+    """The ``cgfem`` modules that module ``name`` imports directly (sorted), read from its
+    import lines (:func:`import_statements`)."""
+    return modules_imported_by(import_statements(module_file(name).read_bytes()), name)
+
+
+def modules_imported_by(tree: ast.AST, name: str) -> tuple[str, ...]:
+    """The ``cgfem`` modules other than ``name`` that the import statements anywhere in
+    ``tree`` (a parse of module ``name``) import (sorted): ``from a import b`` counts ``a``
+    and submodule ``a.b``; relative imports are resolved against ``name``'s package."""
+    is_package = module_file(name).name == "__init__.py"
     found: set[str] = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
@@ -122,13 +129,19 @@ def dependency_closure(name: str) -> tuple[str, ...]:
 
 
 @functools.lru_cache(maxsize=None)
+def file_digest(name: str) -> bytes:
+    """SHA-256 of the source file of module ``name`` (read once per process)."""
+    return hashlib.sha256(module_file(name).read_bytes()).digest()
+
+
+@functools.lru_cache(maxsize=None)
 def source_digest(name: str) -> str:
     """SHA-256 (hex) of the sources of module ``name`` and of its dependency closure."""
     h = hashlib.sha256()
     for dep in dependency_closure(name):
         h.update(dep.encode())
         h.update(b"\0")
-        h.update(hashlib.sha256(module_file(dep).read_bytes()).digest())
+        h.update(file_digest(dep))
     return h.hexdigest()
 
 

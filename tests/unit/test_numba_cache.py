@@ -124,34 +124,10 @@ def test_dependency_closure_follows_package_imports() -> None:
         "cgfem.embedding._face_kernels")
 
 
-def _imports_by_full_walk(name: str) -> tuple[str, ...]:
-    """The oracle: the ``cgfem`` modules imported anywhere in module ``name``, from the
-    whole module's syntax tree."""
-    import ast
-
-    from cgfem import _numba_cache as nc
-
-    path = nc.module_file(name)
-    is_package = path.name == "__init__.py"
-    found = set()
-    for node in ast.walk(ast.parse(path.read_bytes())):
-        if isinstance(node, ast.Import):
-            targets = [a.name for a in node.names]
-        elif isinstance(node, ast.ImportFrom):
-            anchor = name.split(".")
-            drop = (node.level - 1 if is_package else node.level) if node.level else 0
-            anchor = anchor[:len(anchor) - drop] if drop else anchor
-            base = ".".join(anchor + ([node.module] if node.module else [])) if node.level else node.module
-            targets = [base] + [f"{base}.{a.name}" for a in node.names]
-        else:
-            continue
-        found.update(t for t in targets if nc.module_file(t) is not None and t != name)
-    return tuple(sorted(found))
-
-
 def test_import_lines_find_what_the_whole_syntax_tree_finds() -> None:
     """Every module of the package: the imports read from its import lines alone are those of
     its whole syntax tree (module level, in functions, relative, parenthesized over lines)."""
+    import ast
     import pkgutil
 
     from cgfem import _numba_cache as nc
@@ -160,7 +136,8 @@ def test_import_lines_find_what_the_whole_syntax_tree_finds() -> None:
     checked = [n for n in names if nc.module_file(n) is not None]
     assert len(checked) > 100
     for name in checked:
-        assert nc.imported_modules(name) == _imports_by_full_walk(name), name
+        whole = ast.parse(nc.module_file(name).read_bytes())
+        assert nc.imported_modules(name) == nc.modules_imported_by(whole, name), name
 
 
 def test_import_statements_of_tricky_sources() -> None:
