@@ -9,7 +9,7 @@ rule check_case:
     log:
         "logs/check/{case}.log",
     shell:
-        "cgfem check {input} --json > {output}.tmp 2> {log} && mv {output}.tmp {output}"
+        THREADS_ENV + "cgfem check {input} --json > {output}.tmp 2> {log} && mv {output}.tmp {output}"
 
 
 rule check_embedding:
@@ -23,7 +23,7 @@ rule check_embedding:
     log:
         "logs/embedding/{case}_L{level}_{surface}.log",
     shell:
-        "cgfem check {input} --level {wildcards.level} --surface {wildcards.surface} --json "
+        THREADS_ENV + "cgfem check {input} --level {wildcards.level} --surface {wildcards.surface} --json "
         "> {output}.tmp 2> {log} && mv {output}.tmp {output}"
 
 

@@ -7,7 +7,7 @@ rule planar_reference:
     log:
         "logs/reference/planar.log",
     shell:
-        "python3 -m cgfem.reference.planar --out {output} > {log} 2>&1"
+        THREADS_ENV + "python3 -m cgfem.reference.planar --out {output} > {log} 2>&1"
 
 
 # Body-fitted references of the chain examples (cgfem.reference.tori, NGSolve). Their mesh
@@ -29,7 +29,7 @@ rule reference_chain2_steel:
     log:
         "logs/reference/chain2_steel.log",
     shell:
-        "python3 -m cgfem.reference.tori --case {input.case} --from-gold {input.gold} "
+        THREADS_ENV + "python3 -m cgfem.reference.tori --case {input.case} --from-gold {input.gold} "
         "--out {output} > {log} 2>&1"
 
 
@@ -45,7 +45,7 @@ rule reference_chain2_rubber:
     log:
         "logs/reference/chain2_rubber.log",
     shell:
-        "python3 -m cgfem.reference.tori --case {input.case} --from-gold {input.gold} "
+        THREADS_ENV + "python3 -m cgfem.reference.tori --case {input.case} --from-gold {input.gold} "
         "--out {output} > {log} 2>&1"
 
 
@@ -61,5 +61,5 @@ rule reference_chain3:
     log:
         "logs/reference/chain3.log",
     shell:
-        "python3 -m cgfem.reference.tori --case {input.case} --from-gold {input.gold} "
+        THREADS_ENV + "python3 -m cgfem.reference.tori --case {input.case} --from-gold {input.gold} "
         "--out {output} > {log} 2>&1"

@@ -3,6 +3,10 @@ body-fitted references of the chains (when the configuration has them), and the 
 line from the order-2 runs of the chains."""
 import sys
 
+from _threads import limit_threads
+
+limit_threads(snakemake.threads)  # before cgfem imports numba
+
 from cgfem.report.claims import claims, write_claims
 from cgfem.report.curves import AXES
 

@@ -1,6 +1,10 @@
 """Draw one figure of cgfem.report from its input files and save it as PNG and PDF."""
 import sys
 
+from _threads import limit_threads
+
+limit_threads(snakemake.threads)  # before cgfem imports numba
+
 from cgfem.report import figure
 from cgfem.report.style import save_figure
 

@@ -1,6 +1,10 @@
 """Energy-norm error of one planar run against the cached reference, as a CSV table."""
 import sys
 
+from _threads import limit_threads
+
+limit_threads(snakemake.threads)  # before cgfem imports numba
+
 from cgfem.report.energy import energy_errors, reference_error, write_error_table
 
 with open(snakemake.log[0], "w") as sys.stderr:
