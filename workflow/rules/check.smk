@@ -9,7 +9,8 @@ rule check_case:
     log:
         "logs/check/{case}.log",
     shell:
-        THREADS_ENV + "cgfem check {input} --json > {output}.tmp 2> {log} && mv {output}.tmp {output}"
+        "NUMBA_NUM_THREADS={threads} OMP_NUM_THREADS={threads} MKL_NUM_THREADS={threads} "
+        "cgfem check {input} --json > {output}.tmp 2> {log} && mv {output}.tmp {output}"
 
 
 rule check_embedding:
@@ -23,7 +24,8 @@ rule check_embedding:
     log:
         "logs/embedding/{case}_L{level}_{surface}.log",
     shell:
-        THREADS_ENV + "cgfem check {input} --level {wildcards.level} --surface {wildcards.surface} --json "
+        "NUMBA_NUM_THREADS={threads} OMP_NUM_THREADS={threads} MKL_NUM_THREADS={threads} "
+        "cgfem check {input} --level {wildcards.level} --surface {wildcards.surface} --json "
         "> {output}.tmp 2> {log} && mv {output}.tmp {output}"
 
 

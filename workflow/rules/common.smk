@@ -18,10 +18,6 @@ RUN = "results/runs/{case}/L{level}_{surface}"
 RUN_ORDER = "results/runs/{case}/L{level}_{surface}_o{order}"
 #: software of every rule (relative to the rule files)
 ENV = "../envs/cgfem.yaml"
-#: the front of every shell command that computes: numba, OpenMP and MKL on the rule's
-#: threads (the script rules set the same in workflow/scripts/_threads.py), so that a job
-#: keeps to its cores and, on one thread, calls the serial twins of the parallel kernels
-THREADS_ENV = "NUMBA_NUM_THREADS={threads} OMP_NUM_THREADS={threads} MKL_NUM_THREADS={threads} "
 
 
 wildcard_constraints:

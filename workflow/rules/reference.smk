@@ -7,7 +7,8 @@ rule planar_reference:
     log:
         "logs/reference/planar.log",
     shell:
-        THREADS_ENV + "python3 -m cgfem.reference.planar --out {output} > {log} 2>&1"
+        "NUMBA_NUM_THREADS={threads} OMP_NUM_THREADS={threads} MKL_NUM_THREADS={threads} "
+        "python3 -m cgfem.reference.planar --out {output} > {log} 2>&1"
 
 
 # Body-fitted references of the chain examples (cgfem.reference.tori, NGSolve). Their mesh
@@ -29,7 +30,8 @@ rule reference_chain2_steel:
     log:
         "logs/reference/chain2_steel.log",
     shell:
-        THREADS_ENV + "python3 -m cgfem.reference.tori --case {input.case} --from-gold {input.gold} "
+        "NUMBA_NUM_THREADS={threads} OMP_NUM_THREADS={threads} MKL_NUM_THREADS={threads} "
+        "python3 -m cgfem.reference.tori --case {input.case} --from-gold {input.gold} "
         "--out {output} > {log} 2>&1"
 
 
@@ -45,7 +47,8 @@ rule reference_chain2_rubber:
     log:
         "logs/reference/chain2_rubber.log",
     shell:
-        THREADS_ENV + "python3 -m cgfem.reference.tori --case {input.case} --from-gold {input.gold} "
+        "NUMBA_NUM_THREADS={threads} OMP_NUM_THREADS={threads} MKL_NUM_THREADS={threads} "
+        "python3 -m cgfem.reference.tori --case {input.case} --from-gold {input.gold} "
         "--out {output} > {log} 2>&1"
 
 
@@ -61,5 +64,6 @@ rule reference_chain3:
     log:
         "logs/reference/chain3.log",
     shell:
-        THREADS_ENV + "python3 -m cgfem.reference.tori --case {input.case} --from-gold {input.gold} "
+        "NUMBA_NUM_THREADS={threads} OMP_NUM_THREADS={threads} MKL_NUM_THREADS={threads} "
+        "python3 -m cgfem.reference.tori --case {input.case} --from-gold {input.gold} "
         "--out {output} > {log} 2>&1"
