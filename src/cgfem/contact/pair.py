@@ -183,6 +183,8 @@ class ContactPair:
     def __post_init__(self) -> None:
         self.state = ContactState(np.zeros(self.frames.size))
         self._maps = None
+        #: the last search and what it depended on (:meth:`search`)
+        self._memo: _SearchMemo | None = None
         # (n, n_nodes) the slave's FE shape functions at its points, where :meth:`freeze`
         # reads the recovered stress: the points' own interpolation, or (a fitted surface)
         # the FE element's at the reference point
@@ -220,14 +222,25 @@ class ContactPair:
 
     def search(self, u_s: np.ndarray, u_m: np.ndarray) -> tuple:
         """Current slave geometry (:class:`SlaveState`) and its master hits (the previous
-        pairing first), searched for the candidate points only (:meth:`candidates`)."""
+        pairing first), searched for the candidate points only (:meth:`candidates`).
+
+        The last search's result is returned again, the same objects, where nothing it
+        depends on has changed: the same kinematic vectors (equal values), the same
+        recorded pairing (the same object: a pairing is replaced, never changed), Verlet
+        list and polishing, and the same held pieces (equal values). The onset limit's gaps
+        at a Newton step's end point are searched again by the residual there otherwise."""
+        held = self.state.piece_held
+        memo = self._memo
+        if memo is not None and memo.matches(self, u_s, u_m, held):
+            return memo.result
         st = self._slave(u_s)
         rows, near = self.candidates(u_s, u_m, st.x)
         previous = None if self.state.hits is None else self.state.hits.select(rows)
-        held = self.state.piece_held
         band = None if held is None else np.where(held[rows], _rk.HOLD_BAND, _rk.STICKY)
         sub = self.surface.search(u_m, st.x[rows], st.n[rows], self.max_gap, previous, near, band)
-        return st, RayHits.scatter(sub, rows, self.n_points)
+        result = st, RayHits.scatter(sub, rows, self.n_points)
+        self._memo = _SearchMemo(self, u_s, u_m, held, result)
+        return result
 
     def candidates(self, u_s: np.ndarray, u_m: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """A Verlet list of the search: the slave points (indices) that may have a master
@@ -431,6 +444,29 @@ class ContactPair:
             force[rows] = -(w[rows] * lam[rows])[:, None] * gap_gradient_direction(t, st.n[rows])
         return ContactPoints(st.x, st.n, np.where(hits.found, hits.g, np.nan), lam, active, w,
                              self.state.p_N.copy(), force, st.x - self.frames.X)
+
+
+class _SearchMemo:
+    """A pair's last search (:meth:`ContactPair.search`): its ``result`` and its inputs, the
+    kinematic vectors and held pieces as copies, the pairing, Verlet list and polishing as
+    they stood after it."""
+
+    def __init__(self, pair: ContactPair, u_s: np.ndarray, u_m: np.ndarray, held: np.ndarray | None,
+                 result: tuple) -> None:
+        self.u_s, self.u_m = u_s.copy(), u_m.copy()
+        self.held = None if held is None else held.copy()
+        self.hits, self.candidates = pair.state.hits, pair.state.candidates
+        self.polish = getattr(pair.surface, "polish", False)
+        self.result = result
+
+    def matches(self, pair: ContactPair, u_s: np.ndarray, u_m: np.ndarray, held: np.ndarray | None) -> bool:
+        """Whether a search of ``pair`` at ``(u_s, u_m)`` with the pieces ``held`` would
+        repeat this one."""
+        if pair.state.hits is not self.hits or pair.state.candidates is not self.candidates \
+                or getattr(pair.surface, "polish", False) != self.polish or (held is None) != (self.held is None):
+            return False
+        return np.array_equal(u_s, self.u_s) and np.array_equal(u_m, self.u_m) and \
+            (held is None or np.array_equal(held, self.held))
 
 
 def _group_blocks(dofs: np.ndarray, u: np.ndarray, v: np.ndarray, s: np.ndarray, t: np.ndarray
