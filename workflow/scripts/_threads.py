@@ -10,6 +10,6 @@ def limit_threads(threads: int) -> None:
     ``threads``), as a run job does: a job then keeps to its own core beside the other
     jobs, and on one thread it calls the serial twins of the parallel kernels
     (``cgfem._parallel``), which the runs have compiled already, instead of compiling the
-    parallel ones (about 20 s of the first planar error table's job otherwise)."""
+    parallel ones."""
     for name in THREAD_VARIABLES:
         os.environ[name] = str(int(threads))

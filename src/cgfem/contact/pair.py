@@ -464,10 +464,11 @@ class _SearchMemo:
         """Whether a search of ``pair`` at ``(u_s, u_m)`` with the pieces ``held`` would
         repeat this one."""
         if pair.state.hits is not self.hits or pair.state.candidates is not self.candidates \
-                or getattr(pair.surface, "polish", False) != self.polish or (held is None) != (self.held is None):
+                or getattr(pair.surface, "polish", False) != self.polish:
             return False
-        return np.array_equal(u_s, self.u_s) and np.array_equal(u_m, self.u_m) and \
-            (held is None or np.array_equal(held, self.held))
+        same_held = held is self.held or (held is not None and self.held is not None
+                                          and np.array_equal(held, self.held))
+        return same_held and np.array_equal(u_s, self.u_s) and np.array_equal(u_m, self.u_m)
 
 
 def _group_blocks(dofs: np.ndarray, u: np.ndarray, v: np.ndarray, s: np.ndarray, t: np.ndarray
