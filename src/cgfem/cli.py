@@ -176,6 +176,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
         policy = policy_with(args.policy)
     except ValueError as err:
         raise InputError("--policy", str(err)) from None
+    if args.embedding_cache is not None and os.path.exists(args.embedding_cache) \
+            and not os.path.isdir(args.embedding_cache):
+        raise InputError("--embedding-cache", f"{args.embedding_cache} is not a folder")
     start = time.perf_counter()
     received: list[int] = []
 
@@ -193,8 +196,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
+        store = None
+        if args.embedding_cache is not None:
+            from cgfem.embedding.store import EmbeddingStore
+
+            store = EmbeddingStore(args.embedding_cache, log)
         status = run_case(case, args.level, args.surface, args.out, log, args.order, policy=policy,
-                          memory_check=args.memory_check, keep_memory=True)
+                          memory_check=args.memory_check, keep_memory=True, store=store)
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
@@ -257,6 +265,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--policy", action="append", default=[], metavar="NAME=VALUE",
                      help="set one of the solver's tuning constants (cgfem.solve.policy.SolverPolicy; "
                           "repeat for more), for experiments; summary.json records the ones changed")
+    run.add_argument("--embedding-cache", default=None, metavar="DIR",
+                     help="keep the bodies' embeddings in DIR and load them from there in later runs on "
+                          "the same geometry and grid (any surface definition with the same boundary "
+                          "quadrature, any loads and solver settings): the same results, bit for bit")
     run.set_defaults(func=_cmd_run)
     warmup = sub.add_parser("warmup", help="compile and cache the numba kernels (two small contact "
                             "problems, every surface definition) before a batch of runs")

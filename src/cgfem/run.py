@@ -13,6 +13,7 @@ import platform
 import signal
 import time
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 from typing import Callable
 
@@ -23,6 +24,7 @@ from cgfem import __version__
 from cgfem._allocator import keep_freed_memory
 from cgfem.case.model import Body, Case
 from cgfem.embedding.quadrature import Embedding, embed, grid_for
+from cgfem.embedding.store import EmbeddingStore, embedding_key
 from cgfem.embedding.tessellate import Tessellation, boundary_tessellation, keep_vertices
 from cgfem.contact.assembly import summary as contact_summary
 from cgfem.contact.build import build_pair
@@ -252,15 +254,18 @@ def thread_settings() -> dict:
             "environment": {k: os.environ[k] for k in THREAD_VARIABLES if k in os.environ}}
 
 
-def embed_body(solid, body: Body, level: int, surface: str, order: int = 1) -> Embedding:
+def embed_body(solid, body: Body, level: int, surface: str, order: int = 1,
+               store: EmbeddingStore | None = None) -> Embedding:
     """``body`` embedded in its grid of ``level`` for the surface definition ``surface``
     (:mod:`cgfem.definitions`): the boundary quadrature of the definition's
     :attr:`~cgfem.definitions.SurfaceDefinition.quadrature`, the definition's name kept as
     ``Embedding.definition``, and rules exact to the degree the element of ``order`` needs
-    (:attr:`~cgfem.fem.element.Hexahedron.degree`)."""
+    (:attr:`~cgfem.fem.element.Hexahedron.degree`); taken from ``store`` where it holds it
+    (else built and kept there: :mod:`cgfem.embedding.store`)."""
     grid = grid_for(solid, body.grid.h0, level, body.grid.offset)
-    return embed(solid, grid, surface_definition(surface).quadrature, definition=surface,
-                 degree=hexahedron(order).degree)
+    quadrature, degree = surface_definition(surface).quadrature, hexahedron(order).degree
+    build = partial(embed, solid, grid, quadrature, definition=surface, degree=degree)
+    return build() if store is None else store.get(embedding_key(solid, grid, quadrature, degree), surface, build)
 
 
 def build_models(case: Case, level: int, surface: str, log: Callable[[str], None], order: int = 1
@@ -272,11 +277,11 @@ def build_models(case: Case, level: int, surface: str, log: Callable[[str], None
 
 def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None], order: int = 1,
                  policy: SolverPolicy = DEFAULT_POLICY, memory_check: bool = True,
-                 keep_memory: bool = False) -> tuple[list, dict, dict]:
-    """Embed and discretize every body with the element of ``order``: the models, per-body
-    measures and the solids. A level whose memory estimate exceeds the machine's is refused
-    first (:func:`check_memory`; ``policy`` decides whether its systems take the Krylov path)
-    unless ``memory_check`` is False. ``keep_memory``: where the run's estimate
+                 keep_memory: bool = False, store: EmbeddingStore | None = None) -> tuple[list, dict, dict]:
+    """Embed (kept in ``store``: :func:`embed_body`) and discretize every body with the element
+    of ``order``: the models, per-body measures and the solids. A level whose memory estimate
+    exceeds the machine's is refused first (:func:`check_memory`; ``policy`` decides whether
+    its systems take the Krylov path) unless ``memory_check`` is False. ``keep_memory``: where the run's estimate
     (:func:`run_memory`) is at most :data:`KEEP_MEMORY_SHARE` of the memory the process may
     hold (:func:`machine_memory`), the process keeps the memory it frees for its later arrays
     (:func:`~cgfem._allocator.keep_freed_memory`: faster where freed pages are slow to get
@@ -296,8 +301,8 @@ def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None
     finite = case.kinematics == "finite"
     models, measures = [], {}
     for body in case.bodies:
-        tic = time.perf_counter()
-        emb = embed_body(solids[body.name], body, level, surface, order)
+        tic, loaded = time.perf_counter(), store.loaded if store is not None else 0
+        emb = embed_body(solids[body.name], body, level, surface, order, store)
         model = BodyModel.build(body, emb, boundary_of(case, body.name), case.solver, finite,
                                 hexahedron(order))
         models.append(model)
@@ -309,7 +314,8 @@ def build_bodies(case: Case, level: int, surface: str, log: Callable[[str], None
             "volume": float(emb.volume.w.sum()), "area": float(emb.surface.w.sum()),
             "brep_volume": brep[body.name].volume, "brep_area": brep[body.name].area}
         log(f"body {body.name}: {model.space.n_nodes} nodes, {model.n_dofs} dofs, "
-            f"{int(model.space.cut.sum())} cut elements ({time.perf_counter() - tic:.2f} s)")
+            f"{int(model.space.cut.sum())} cut elements ({time.perf_counter() - tic:.2f} s"
+            f"{', embedding loaded' if store is not None and store.loaded > loaded else ''})")
     return models, measures, solids
 
 
@@ -429,12 +435,13 @@ def _remove_created(created: list[Path]) -> None:
 def run_case(case: Case, level: int, surface: str, out: Path,
              log: Callable[[str], None] = lambda m: None, order: int = 1,
              policy: SolverPolicy = DEFAULT_POLICY, memory_check: bool = True,
-             keep_memory: bool = False) -> RunStatus:
+             keep_memory: bool = False, store: EmbeddingStore | None = None) -> RunStatus:
     """Solve ``case`` with the hexahedra of ``order`` (1 or 2) and write its results to ``out``;
     ``policy``: the solver's tuning (:class:`~cgfem.solve.policy.SolverPolicy`);
     ``memory_check``: refuse a level whose memory estimate exceeds the machine's
     (:func:`check_memory`); ``keep_memory``: let the process keep the memory it frees where
-    the estimate leaves room (:func:`build_bodies`; ``cgfem run`` does).
+    the estimate leaves room (:func:`build_bodies`; ``cgfem run`` does); ``store``: where
+    the bodies' embeddings are kept for runs on the same geometry and grid (None: built).
 
     Returns the run status (``converged``, ``outer_not_converged`` or ``failed``, see
     :mod:`cgfem.solve.static`; :data:`INTERRUPTED` when ``log`` raised
@@ -456,7 +463,7 @@ def run_case(case: Case, level: int, surface: str, out: Path,
     started = time.perf_counter()
     try:
         models, measures, solids = build_bodies(case, level, surface, log, order, policy, memory_check,
-                                                keep_memory)
+                                                keep_memory, store)
         try:
             out.mkdir(parents=True, exist_ok=True)
         except OSError as err:

@@ -6,6 +6,8 @@ rule planar_errors:
         reference="results/reference/planar.npz",
     output:
         "results/analysis/planar/errors_L{level}_{surface}.csv",
+    params:
+        embeddings=EMBEDDINGS,
     conda:
         ENV
     log:

@@ -16,6 +16,10 @@ SURFACES = config["surfaces"]
 RUN = "results/runs/{case}/L{level}_{surface}"
 #: run folder of a higher element order (examples.*.orders; order 1 keeps RUN)
 RUN_ORDER = "results/runs/{case}/L{level}_{surface}_o{order}"
+#: the bodies' embeddings, built once per geometry, grid and boundary quadrature and loaded by
+#: every later run and error table on them (`cgfem run --embedding-cache`): nurbs_fe and
+#: nurbs_fit share theirs; the results are the same bits either way
+EMBEDDINGS = "results/cache/embeddings"
 #: software of every rule (relative to the rule files)
 ENV = "../envs/cgfem.yaml"
 

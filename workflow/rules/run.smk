@@ -10,6 +10,7 @@ rule run_case:
         summary=f"{RUN}/summary.json",
     params:
         out=run_folder,
+        embeddings=EMBEDDINGS,
     conda:
         ENV
     log:
@@ -22,7 +23,8 @@ rule run_case:
     shell:
         "NUMBA_NUM_THREADS={threads} OMP_NUM_THREADS={threads} MKL_NUM_THREADS={threads} "
         "cgfem run {input.case} --level {wildcards.level} --surface {wildcards.surface} "
-        "--out {params.out} 2> {log} || [ $? -eq 1 ] && [ -f {output.summary} ]"
+        "--out {params.out} --embedding-cache {params.embeddings} 2> {log} "
+        "|| [ $? -eq 1 ] && [ -f {output.summary} ]"
 
 
 rule run_case_order:
@@ -35,6 +37,7 @@ rule run_case_order:
         summary=f"{RUN_ORDER}/summary.json",
     params:
         out=lambda wildcards: RUN_ORDER.format(**wildcards),
+        embeddings=EMBEDDINGS,
     conda:
         ENV
     log:
@@ -49,4 +52,5 @@ rule run_case_order:
     shell:
         "NUMBA_NUM_THREADS={threads} OMP_NUM_THREADS={threads} MKL_NUM_THREADS={threads} "
         "cgfem run {input.case} --level {wildcards.level} --surface {wildcards.surface} "
-        "--order {wildcards.order} --out {params.out} 2> {log} || [ $? -eq 1 ] && [ -f {output.summary} ]"
+        "--order {wildcards.order} --out {params.out} --embedding-cache {params.embeddings} 2> {log} "
+        "|| [ $? -eq 1 ] && [ -f {output.summary} ]"

@@ -20,6 +20,7 @@ import numpy as np
 
 from cgfem.case.load import load_case
 from cgfem.case.model import Case
+from cgfem.embedding.store import EmbeddingStore
 from cgfem.fem._element_kernels import point_gradients
 from cgfem.fem.element import hexahedron
 from cgfem.fem.space import Space
@@ -76,13 +77,14 @@ def nodal_displacements(run: Run, step: int = -1) -> dict[str, tuple[np.ndarray,
     return out
 
 
-def volume_strain(case: Case, run: Run, body_name: str, u: np.ndarray, nodes: np.ndarray
-                  ) -> VolumeStrain:
+def volume_strain(case: Case, run: Run, body_name: str, u: np.ndarray, nodes: np.ndarray,
+                  store: EmbeddingStore | None = None) -> VolumeStrain:
     """Strain of nodal displacement ``u`` (n_nodes, 3) at the volume rule of ``body_name``
-    rebuilt for the run's level and surface; ``nodes`` (n_nodes, 3) are the VTU's node
-    positions, checked against the rebuilt space's (they must be the same nodes)."""
+    rebuilt for the run's level and surface (or loaded from ``store``, where the run may have
+    kept it); ``nodes`` (n_nodes, 3) are the VTU's node positions, checked against the
+    rebuilt space's (they must be the same nodes)."""
     body = next(b for b in case.bodies if b.name == body_name)
-    embedding = embed_body(build_solid(body.geometry), body, run.level, run.surface, run.order)
+    embedding = embed_body(build_solid(body.geometry), body, run.level, run.surface, run.order, store)
     space = Space.from_embedding(embedding, hexahedron(run.order))
     if space.coordinates.shape != nodes.shape or not np.allclose(space.coordinates, nodes,
                                                                  rtol=0.0, atol=1e-9 * space.h):
@@ -94,16 +96,17 @@ def volume_strain(case: Case, run: Run, body_name: str, u: np.ndarray, nodes: np
     return VolumeStrain(points.x, points.w, 0.5 * (grad + grad.transpose(0, 2, 1)))
 
 
-def energy_errors(case_file: str | Path, run_folder: str | Path, error: BodyError) -> list[ErrorRow]:
+def energy_errors(case_file: str | Path, run_folder: str | Path, error: BodyError,
+                  store: EmbeddingStore | None = None) -> list[ErrorRow]:
     """Energy-norm error of every body of a run at its last step relative to the reference's
     norm, and of all bodies (body ``TOTAL``); no rows for a failed run (it did not reach the
-    final load the reference solves)."""
+    final load the reference solves). ``store``: embeddings (:func:`volume_strain`)."""
     case, run = load_case(case_file), Run.load(run_folder)
     rows: list[ErrorRow] = []
     if run.failed or run.n_steps == 0:
         return rows
     for name, (u, nodes) in nodal_displacements(run).items():
-        s = volume_strain(case, run, name, u, nodes)
+        s = volume_strain(case, run, name, u, nodes, store)
         rows.append(ErrorRow(run.surface, run.level, name, run.dofs, float(run.body(name)["h"]),
                              float(error(s.x, s.w, s.strain, name))))
     rows.append(ErrorRow(run.surface, run.level, TOTAL, run.dofs, max(r.h for r in rows),
