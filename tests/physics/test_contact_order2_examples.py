@@ -47,9 +47,9 @@ def test_two_link_chains_converge_and_balance(tmp_path, example, level, surface)
 #: chain3 with facets at level 0 (docs/validation.md, "Contact with triquadratic hexahedra"):
 #: the chorded tubes leave link C room to hang free at this pull, at order 1 as at order 2.
 #: With its spin held (chain3.yaml's hold_spin) the slack link drifts by another turn, which
-#: the state check rejects (``rotation_stretch``) at load 0.59 with the default constants and
-#: the first two fallbacks; the third (the energy search, shift 1e-5) reaches full load
-#: (docs/methods/contact.md, "Fallbacks")
+#: the state check rejects (``rotation_stretch``) at load 0.59 with the default constants; the
+#: first fallback (the energy search, shift 1e-6) reaches full load (docs/methods/contact.md,
+#: "Fallbacks")
 SLACK = (0, "facets")
 THREE_LINK_RUNS = [(level, surface) for level in (0, 1) for surface in NAMES]
 

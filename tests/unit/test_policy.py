@@ -65,9 +65,10 @@ def test_fallbacks_are_groups_of_settings_tried_in_order():
     assert all(p.fallbacks == "none" for _, p in found)
     assert [n for n, _ in fallback_policies(policy, floating=False)] == [2]
     assert fallback_policies(replace(DEFAULT_POLICY, fallbacks="none")) == []
-    # the default: the energy line search, then with the floating bodies' shift raised twice
+    # the default: the energy line search with the floating bodies' shift raised, without,
+    # and with the shift raised further
     assert [changed(p, replace(DEFAULT_POLICY, fallbacks="none")) for _, p in fallback_policies(DEFAULT_POLICY)] \
-        == [{"floating_search": "energy"}, {"floating_search": "energy", "floating_shift": 1e-6},
+        == [{"floating_search": "energy", "floating_shift": 1e-6}, {"floating_search": "energy"},
             {"floating_search": "energy", "floating_shift": 1e-5}]
     assert fallback_policies(DEFAULT_POLICY, floating=False) == []
 

@@ -90,10 +90,11 @@ class SolverPolicy:
         the run's constants changed by the group (the failed attempts' sub-steps dropped), and
         the run keeps the group that converged for the rest of its steps (:func:`fallback_policies`; ``"none"``: a
         failed step ends the run). A group that changes only :data:`FLOATING` constants is
-        tried only where a body is held by contact alone. The default: the energy line search,
-        then with it the floating bodies' shift raised to ``1e-6`` and to ``1e-5`` (more damping
-        of their rigid motions). A run that converges without a fallback is untouched
-        (``docs/methods/contact.md``, "Fallbacks").
+        tried only where a body is held by contact alone. The default: the energy line search
+        with the floating bodies' shift raised to ``1e-6`` (more damping of their rigid
+        motions), the energy line search alone, and the search with the shift at ``1e-5``. A run
+        that converges without a fallback is untouched (``docs/methods/contact.md``,
+        "Fallbacks").
     rotation_stretch : in small strain a converged state is rejected (the increment cut back)
         where a floating body's linearized rotation stretches a chord between its contacts by
         more than this fraction of the chord's elastic stretch (the rotation is strain-free
@@ -168,7 +169,7 @@ class SolverPolicy:
     damping_decay: float = 0.25
     damping_above: float = 1e-2
     damping_max: float = 1e6
-    fallbacks: str = ("floating_search=energy; floating_search=energy, floating_shift=1e-6; "
+    fallbacks: str = ("floating_search=energy, floating_shift=1e-6; floating_search=energy; "
                       "floating_search=energy, floating_shift=1e-5")
     rotation_stretch: float = 1.0
     spin_stiffness: float = 1e-2
