@@ -8,7 +8,7 @@
    printed too: memory the process never had, what every run pays once for its peak.
 2. **A run** (default planar at level 3 with ``nurbs_fe``, one thread, the two variants one
    after the other): ``cgfem run``'s wall time and peak resident memory with freed memory
-   kept (whatever the run's memory estimate, ``cgfem.run.KEEP_MEMORY_SHARE``) and with glibc's
+   kept (whatever the run's memory estimate, ``cgfem.memory.KEEP_MEMORY_SHARE``) and with glibc's
    default, their ratio, and whether the two summaries are the same bits
    (:func:`cgfem.results.stable`).
 
@@ -28,7 +28,8 @@ import time
 from pathlib import Path
 
 from cgfem.results import stable, write_json_atomic
-from cgfem.run import KEPT_MEMORY_LOG, THREAD_COUNTS
+from cgfem.memory import KEPT_MEMORY_LOG
+from cgfem.run import THREAD_COUNTS
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -57,9 +58,10 @@ print(json.dumps(rates))
 #: with glibc's default allocator ("default")
 RUN = r"""
 import sys
+import cgfem.memory
 import cgfem.run
 if sys.argv[1] == "kept":
-    cgfem.run.KEEP_MEMORY_SHARE = float("inf")
+    cgfem.memory.KEEP_MEMORY_SHARE = float("inf")
 else:
     cgfem.run.keep_freed_memory = lambda: False
 from cgfem.cli import main

@@ -160,10 +160,10 @@ def test_a_bad_config_is_refused(workdir, tmp_path):
 
 def test_runs_reserve_their_estimated_memory(workdir):
     """Every run job of the extended configuration reserves ``mem_mb``, the run's own estimate
-    (``cgfem.run.run_memory``) in MB, at most the budget ``--resources mem_mb`` (a job above
+    (``cgfem.memory.run_memory``) in MB, at most the budget ``--resources mem_mb`` (a job above
     it would never start)."""
     from cgfem.case import load_case
-    from cgfem.run import run_memory
+    from cgfem.memory import run_memory
     budget = 12_000
     done = snakemake(workdir, "-n", "--forceall", "--configfile", "config/extended.yaml",
                      "--resources", f"mem_mb={budget}")

@@ -184,8 +184,8 @@ def test_memory_guard_message_names_the_need(tmp_path, capsys):
 def test_no_memory_check_runs_a_level_the_estimate_refuses(tmp_path, monkeypatch, capsys):
     """On a machine the estimate finds too small the level is refused (exit 2, one line naming
     the way round, no folder); ``--no-memory-check`` runs it."""
-    import cgfem.run
-    monkeypatch.setattr(cgfem.run, "machine_memory", lambda: 2**20)
+    import cgfem.memory
+    monkeypatch.setattr(cgfem.memory, "machine_memory", lambda: 2**20)
     out = tmp_path / "o"
     args = ["run", _write(tmp_path, LINK), "--level", "0", "--surface", "facets", "--out", str(out), "--quiet"]
     assert main(args) == 2
@@ -201,7 +201,7 @@ def test_memory_guard_compares_with_the_machine_not_the_free_memory():
     free on a 23 GiB machine, where it peaks at 6 GB)."""
     from cgfem.case import load_case
     from cgfem.errors import InputError
-    from cgfem.run import check_memory, estimate_memory
+    from cgfem.memory import check_memory, estimate_memory
     case = load_case(CASES / "planar.yaml")
     measures = {b.name: BOX_MEASURES for b in case.bodies}
     need, _, _ = estimate_memory(case, 3, measures)
@@ -218,7 +218,7 @@ def test_memory_estimate_follows_the_solve_path():
     ``SADDLE_DIRECT_DOFS`` unknowns on, with ``KRYLOV_FIT_MEMORY`` times the direct path's
     estimate."""
     from cgfem.case import load_case
-    from cgfem.run import DIRECT_FIT_MEMORY, KRYLOV_FIT_MEMORY, KRYLOV_MEMORY, estimate_memory
+    from cgfem.memory import DIRECT_FIT_MEMORY, KRYLOV_FIT_MEMORY, KRYLOV_MEMORY, estimate_memory
     case = load_case(CASES / "chain2_steel.yaml")
     measures = {b.name: LINK_MEASURES for b in case.bodies}
     for order in (1, 2):
@@ -251,7 +251,7 @@ def test_a_body_held_by_contact_alone_keeps_the_direct_path_longer():
     (chain2_steel, finite strain) elsewhere: at a size between the two (with the latter at
     20 000) chain2_steel takes the Krylov path and chain3 the direct one."""
     from cgfem.case import load_case
-    from cgfem.run import estimate_memory
+    from cgfem.memory import estimate_memory
     measures = {name: LINK_MEASURES for name in ("link_a", "link_b", "link_c")}
     steel, chain3 = (load_case(CASES / f"{name}.yaml") for name in ("chain2_steel", "chain3"))
     assert chain3.held_by_contact_alone and not steel.held_by_contact_alone
@@ -269,7 +269,7 @@ def test_triquadratic_systems_take_the_krylov_path_from_their_own_threshold():
     one; chain3, whose middle link is held by
     contact alone, keeps the direct path at order 2, level 1 (about 72k)."""
     from cgfem.case import load_case
-    from cgfem.run import estimate_memory
+    from cgfem.memory import estimate_memory
     measures = {name: LINK_MEASURES for name in ("link_a", "link_b", "link_c")}
     steel, chain3 = (load_case(CASES / f"{name}.yaml") for name in ("chain2_steel", "chain3"))
     low, high = DEFAULT_POLICY.krylov_order2_min_dofs, DEFAULT_POLICY.krylov_nonsymmetric_min_dofs
@@ -287,7 +287,7 @@ def test_memory_estimate_without_contact_lets_the_bent_half_torus_run_order_2_at
     below 23 GiB; the same two links with and without their contact pair differ by the
     factor alone."""
     from cgfem.case import load_case
-    from cgfem.run import KRYLOV_MEMORY, KRYLOV_MEMORY_NO_CONTACT, estimate_memory
+    from cgfem.memory import KRYLOV_MEMORY, KRYLOV_MEMORY_NO_CONTACT, estimate_memory
     bent = load_case(CASES / "bent_half_torus.yaml")
     assert not bent.contact
     need, dofs, krylov = estimate_memory(bent, 3, {"link": LINK_MEASURES}, 2)
@@ -327,7 +327,7 @@ def test_the_memory_a_run_reserves_bounds_its_measured_peak():
     there: the boxes' cut elements are counted from their projected area (about half the
     ``2 A / h^2`` of a curved surface)."""
     from cgfem.case import load_case
-    from cgfem.run import check_memory, run_memory
+    from cgfem.memory import check_memory, run_memory
     reserved = {}
     for name, level, surface, order, peak in MEASURED_PEAKS:
         case = load_case(CASES / f"{name}.yaml")

@@ -70,38 +70,39 @@ def test_a_freed_large_array_is_kept_for_the_next():
 def test_a_run_keeps_freed_memory_only_where_its_estimate_leaves_room(monkeypatch, fraction, kept):
     """``cgfem run`` (``build_bodies(..., keep_memory=True)``) keeps freed memory where the
     run's estimate is at most KEEP_MEMORY_SHARE of the machine's memory, and says so."""
+    import cgfem.memory as memory
     import cgfem.run as run
     from cgfem.case.load import load_case
     from tests.support.paths import CASES
 
     case = load_case(CASES / "planar.yaml")
-    need = run.run_memory(case, 0, "facets")
+    need = memory.run_memory(case, 0, "facets")
     calls: list[bool] = []
     monkeypatch.setattr(run, "keep_freed_memory", lambda: calls.append(True) or True)
     # a machine on which the estimate is ``fraction`` of KEEP_MEMORY_SHARE of its memory
-    monkeypatch.setattr(run, "machine_memory", lambda: int(need / (run.KEEP_MEMORY_SHARE * fraction)))
+    monkeypatch.setattr(memory, "machine_memory", lambda: int(need / (memory.KEEP_MEMORY_SHARE * fraction)))
     lines: list[str] = []
     run.build_bodies(case, 0, "facets", lines.append, memory_check=False, keep_memory=True)
     assert bool(calls) == kept
-    assert any(line.startswith(run.KEPT_MEMORY_LOG) for line in lines) == kept
+    assert any(line.startswith(memory.KEPT_MEMORY_LOG) for line in lines) == kept
 
 
 def test_a_control_groups_limit_is_the_memory_the_process_may_hold(monkeypatch):
     """Under a memory limit smaller than the machine (a container, a cluster job limited to the
     estimate it requested) the memory guard, the pipeline's budget and the share of kept memory
     are taken of the limit."""
-    import cgfem.run as run
+    import cgfem.memory as memory
 
-    total = run.machine_memory()
-    monkeypatch.setattr(run, "cgroup_memory_limit", lambda: total // 3)
-    assert run.machine_memory() == total // 3
-    monkeypatch.setattr(run, "cgroup_memory_limit", lambda: 2 * total)
-    assert run.machine_memory() == total
+    total = memory.machine_memory()
+    monkeypatch.setattr(memory, "cgroup_memory_limit", lambda: total // 3)
+    assert memory.machine_memory() == total // 3
+    monkeypatch.setattr(memory, "cgroup_memory_limit", lambda: 2 * total)
+    assert memory.machine_memory() == total
 
 
 @pytest.mark.parametrize("version", [1, 2])
 def test_the_control_groups_limit_is_read_from_the_groups_own_folder(tmp_path, version):
-    from cgfem.run import cgroup_memory_limit
+    from cgfem.memory import cgroup_memory_limit
 
     cgroups = tmp_path / "cgroup"
     if version == 2:

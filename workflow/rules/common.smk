@@ -6,7 +6,7 @@ from pathlib import Path
 from snakemake.utils import validate
 
 from cgfem.case import load_case
-from cgfem.run import case_measures, machine_memory, run_memory
+from cgfem.memory import case_measures, machine_memory, run_memory
 
 
 validate(config, "../schemas/config.schema.yaml")
@@ -33,7 +33,7 @@ wildcard_constraints:
 
 #: the memory (MB) the runs may hold at once: ``--resources mem_mb=N`` or, run on this
 #: machine (no --jobs for a cluster), its physical memory. Every run reserves its estimate
-#: (cgfem.run.run_memory), so that two large runs (chain3 at level 3 with nurbs_fit, 15 GB,
+#: (cgfem.memory.run_memory), so that two large runs (chain3 at level 3 with nurbs_fit, 15 GB,
 #: and facets, 11 GB) do not start together on a 25 GB machine; on a cluster each job
 #: requests its own.
 def _global_resource(name):
