@@ -66,6 +66,7 @@ def embedding_key(solid: Solid, grid: CartesianGrid, quadrature: str, degree: in
 
 
 def _umask() -> int:
+    """The process's file mode creation mask (read by setting it and setting it back)."""
     mask = os.umask(0o022)
     os.umask(mask)
     return mask
