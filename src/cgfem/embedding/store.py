@@ -11,11 +11,11 @@ a NURBS run's set-up (several seconds per body at the finer levels and with triq
 elements), and a study that varies anything but the geometry and grid (the surface
 definition, the loads, the solver) repeats it identically.
 
-Files are written to a temporary name and renamed, so a reader sees a whole file or none, and
-processes that build the same embedding at once each write the same bytes. A file that does
-not load (truncated, another format) is built again and replaced. A change of any module the
-embedding depends on changes the key, so a stale file is never read; old files are not
-removed (delete the folder to reclaim the space).
+Files are written as :mod:`cgfem.atomic` writes (a temporary name, flushed, renamed), so a
+reader sees a whole file or none, and processes that build the same embedding at once each
+write the same bytes. A file that does not load (truncated, another format) is built again
+and replaced. A change of any module the embedding depends on changes the key, so a stale
+file is never read; old files are not removed (delete the folder to reclaim the space).
 """
 
 from __future__ import annotations
@@ -23,7 +23,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import os
-import tempfile
 import zipfile
 from pathlib import Path
 from typing import Any, Callable
@@ -31,6 +30,7 @@ from typing import Any, Callable
 import numpy as np
 
 from cgfem._numba_cache import source_digest
+from cgfem.atomic import fsync, new_temporary
 from cgfem.embedding.facets import FacetSurface
 from cgfem.embedding.grid import CartesianGrid
 from cgfem.embedding.moments import VolumeRule
@@ -65,25 +65,16 @@ def embedding_key(solid: Solid, grid: CartesianGrid, quadrature: str, degree: in
     return h.hexdigest()
 
 
-def _umask() -> int:
-    """The process's file mode creation mask (read by setting it and setting it back)."""
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
 def _pack(emb: Embedding) -> dict[str, np.ndarray]:
     """The arrays of ``emb`` and of its reduced boundary rule, by ``part.field`` name."""
     out: dict[str, np.ndarray] = {
         "status": emb.status, "fallback": emb.fallback, "degree": np.asarray(emb.degree),
         "patch_names": np.asarray(emb.patch_names, dtype=str),
         "grid": np.asarray([emb.grid.h, *emb.grid.origin, *emb.grid.shape], dtype=np.float64)}
-    parts = {"volume": emb.volume, "surface": emb.surface, "boundary": emb.boundary, "facets": emb.facets}
-    for part, rule in parts.items():
-        if rule is None:
-            continue
-        for f in dataclasses.fields(rule):
-            out[f"{part}.{f.name}"] = getattr(rule, f.name)
+    for part in _ARRAY_RULES:
+        rule = getattr(emb, part)          # ``boundary`` is built here if it was not yet
+        if rule is not None:
+            out.update({f"{part}.{f.name}": getattr(rule, f.name) for f in dataclasses.fields(rule)})
     return out
 
 
@@ -120,27 +111,25 @@ class EmbeddingStore:
     def load(self, key: str, definition: str) -> Embedding | None:
         """The stored embedding of ``key`` for ``definition``, or None if there is none or its
         file does not load."""
-        path = self.path(key)
         try:
-            with np.load(path, allow_pickle=False) as arrays:
+            with np.load(self.path(key), allow_pickle=False) as arrays:
                 return _unpack({k: arrays[k] for k in arrays.files}, definition)
-        except FileNotFoundError:
-            return None
         except (OSError, ValueError, KeyError, TypeError, zipfile.BadZipFile, EOFError):
-            return None
+            return None         # none (FileNotFoundError), or truncated, or of another layout
 
     def save(self, key: str, emb: Embedding) -> None:
         """Store ``emb`` (its reduced boundary rule built first) under ``key``, atomically."""
         arrays = _pack(emb)
         self.folder.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=self.folder, prefix=".tmp-", suffix=".npz")
+        target = self.path(key)
+        tmp = new_temporary(target)
         try:
-            with os.fdopen(fd, "wb") as f:
+            with open(tmp, "wb") as f:
                 np.savez(f, **arrays)
-            os.chmod(tmp, 0o666 & ~_umask())      # as an open() would have made it
-            os.replace(tmp, self.path(key))
+            fsync(tmp)
+            os.replace(tmp, target)
         except BaseException:
-            Path(tmp).unlink(missing_ok=True)
+            tmp.unlink(missing_ok=True)
             raise
 
     def get(self, key: str, definition: str, build: Callable[[], Embedding]) -> Embedding:
