@@ -14,11 +14,13 @@ include: "workflow/rules/common.smk"
 
 
 rule all:
-    """Every final figure (PNG and PDF), the claims table and the checked cases."""
+    """Every final figure (PNG and PDF), the claims table, the checked cases and the
+    kernels compiled in shares (first, side by side)."""
     input:
         expand("paper_figures/{name}.{ext}", name=FIGURES, ext=["png", "pdf"]),
         "results/claims.md",
         expand("results/check/{case}.json", case=EXAMPLES),
+        expand(KERNELS, share=range(1, KERNEL_SHARES + 1), shares=KERNEL_SHARES),
     default_target: True
 
 

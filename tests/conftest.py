@@ -34,3 +34,11 @@ if "PYTEST_XDIST_WORKER" in os.environ:
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "slow: solves a whole problem or builds large embeddings (deselect with -m 'not slow')")
     config.addinivalue_line("markers", "long: an acceptance run of minutes, left out by default (run with -m long)")
+    # each worker first compiles its share of the kernels (cgfem.precompile): on a cold cache
+    # the workers would otherwise each compile nearly all of them in their first tests; on a
+    # warm one this loads the share from the cache
+    worker = os.environ.get("PYTEST_XDIST_WORKER")       # gw0, gw1, ...
+    if worker is not None:
+        from cgfem.precompile import compile_share
+
+        compile_share(int(worker.removeprefix("gw")) + 1, int(os.environ["PYTEST_XDIST_WORKER_COUNT"]))

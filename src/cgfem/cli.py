@@ -213,17 +213,45 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return EXIT_OK if status.status == CONVERGED else EXIT_FAILED
 
 
+def _parse_share(text: str) -> tuple[int, int]:
+    """``K/N`` of ``--share``: (k, n) with 1 <= k <= n."""
+    k, slash, n = text.partition("/")
+    if not (slash and k.isdigit() and n.isdigit() and 1 <= int(k) <= int(n)):
+        raise InputError("--share", f"must be K/N with 1 <= K <= N, got {text!r}")
+    return int(k), int(n)
+
+
 def _cmd_warmup(args: argparse.Namespace) -> int:
     import time
 
-    from cgfem.warmup import warm_up
-
-    keep_freed_memory()
     start = time.perf_counter()
 
     def log(message: str) -> None:
         print(f"[{time.perf_counter() - start:8.2f} s] {message}", file=sys.stderr, flush=True)
 
+    if args.share is not None and args.record is not None:
+        raise InputError("--record", "cannot be combined with --share")
+    if args.share is not None:
+        from cgfem.precompile import compile_share
+
+        k, n = _parse_share(args.share)
+        print(json.dumps(compile_share(k, n, log=log).as_dict(), indent=2))
+        return EXIT_OK
+    if args.record is not None:
+        from cgfem.precompile import record
+
+        if os.path.isdir(args.record):
+            raise InputError("--record", f"{args.record} is a folder, not a file")
+        try:
+            entries = record(args.record, log)
+        except RuntimeError as err:
+            print(f"cgfem: error: {err}", file=sys.stderr)
+            return EXIT_FAILED
+        log(f"{sum(1 for e in entries if e.types)} kernel versions, {len(entries)} entries: {args.record}")
+        return EXIT_OK
+    from cgfem.warmup import warm_up
+
+    keep_freed_memory()
     try:
         warm_up(log)
     except RuntimeError as err:
@@ -272,6 +300,12 @@ def build_parser() -> argparse.ArgumentParser:
     run.set_defaults(func=_cmd_run)
     warmup = sub.add_parser("warmup", help="compile and cache the numba kernels (two small contact "
                             "problems, every surface definition) before a batch of runs")
+    warmup.add_argument("--share", default=None, metavar="K/N",
+                        help="compile only the K-th of N shares of the kernels the warm-up calls, as "
+                             "listed in the package's manifest (start the N shares side by side)")
+    warmup.add_argument("--record", default=None, metavar="FILE",
+                        help="write that manifest to FILE: the warm-up compiled from an empty cache in "
+                             "a process of its own (minutes)")
     warmup.set_defaults(func=_cmd_warmup)
     return parser
 

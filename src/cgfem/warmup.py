@@ -4,9 +4,9 @@ Every kernel is compiled with ``cache=True``, so a process that finds the cache 
 well under a second; a process that does not compiles every kernel it calls, minutes in all.
 Jobs started together on a fresh install (many jobs of a cluster) each compile the kernels
 they call at the same time. Running :func:`warm_up` once first leaves the cache complete for
-all of them. The pipeline does not use it: on two cores a warm-up did not make the smoke run
-faster than its first jobs compiling side by side (docs/performance.md, "Full pipeline
-runs").
+all of them. On a few cores, :mod:`cgfem.precompile` does better: the kernels these runs
+compile, listed once, compiled in shares by as many processes at once (the pipeline's first
+jobs, the test suite's workers).
 
 It solves two small contact problems, on the coarsest grids, with each surface definition:
 two half-torus links pulled apart by 0.5 mm (Neo-Hookean, finite strain; rational NURBS

@@ -62,6 +62,7 @@ def expected_order2_runs(config: dict, smoke: dict | None = None) -> set[str]:
 def test_smoke_plan_has_every_rule_once_per_job(workdir):
     config = yaml.safe_load((REPO / "config" / "smoke.yaml").read_text())
     jobs = planned_jobs(workdir, "--configfile", "config/smoke.yaml")
+    assert jobs.pop("compile_kernels") >= 1             # one per core: below
     n_planar = len(config["examples"]["planar"]["levels"]) * len(config["surfaces"])
     assert jobs == {"all": 1, "check_case": 4, "run_case": expected_runs(config), "planar_reference": 1,
                     "run_case_order": 1, "planar_errors": n_planar, "claims": 1, **{f: 1 for f in FIGURES}}
@@ -84,6 +85,18 @@ def test_full_plan_runs_every_example_level_and_definition(workdir):
         "planar_reference": 1, "reference_chain2_steel": 1, "reference_chain2_rubber": 1,
         "reference_chain3": 1}
     assert jobs["validation"] == 1
+
+
+@pytest.mark.parametrize("cores", [1, 2, 3])
+def test_the_kernels_compile_in_one_share_per_core_first(workdir, cores):
+    """rule compile_kernels: a share of the kernels per core, ahead of every other job."""
+    assert planned_jobs(workdir, "--cores", str(cores), "--configfile", "config/smoke.yaml")["compile_kernels"] == cores
+    done = snakemake(workdir, "-n", "--forceall", "--cores", str(cores), "--configfile", "config/smoke.yaml")
+    text = done.stdout + done.stderr
+    shares = set(re.findall(r"results/cache/kernels/share_(\d+)_of_(\d+)\.json", text))
+    assert shares == {(str(k), str(cores)) for k in range(1, cores + 1)}
+    priorities = {int(p) for p in re.findall(r"priority: (\d+)", text)}
+    assert re.search(r"rule compile_kernels:.*?priority: 100", text, re.S) and max(priorities) == 100
 
 
 def planned_runs(root: Path, *args: str, target: str | None = None) -> set[str]:

@@ -20,6 +20,9 @@ RUN_ORDER = "results/runs/{case}/L{level}_{surface}_o{order}"
 #: every later run and error table on them (`cgfem run --embedding-cache`): nurbs_fe and
 #: nurbs_fit share theirs; the results are the same bits either way
 EMBEDDINGS = "results/cache/embeddings"
+#: the kernels compiled in shares before the runs (rule compile_kernels), one per core
+KERNELS = "results/cache/kernels/share_{share}_of_{shares}.json"
+KERNEL_SHARES = max(1, int(workflow.cores or 1))
 #: software of every rule (relative to the rule files)
 ENV = "../envs/cgfem.yaml"
 
@@ -29,6 +32,8 @@ wildcard_constraints:
     level=r"\d+",
     surface="|".join(SURFACES),
     order="2",
+    share=r"\d+",
+    shares=r"\d+",
 
 
 #: the memory (MB) the runs may hold at once: ``--resources mem_mb=N`` or, run on this

@@ -1,3 +1,22 @@
+rule compile_kernels:
+    """Compile one of KERNEL_SHARES shares of the numba kernels (``cgfem warmup --share``)
+    before the runs: the shares run side by side as the first jobs, where the first runs
+    would each compile every kernel at once. With a warm cache they only load them."""
+    output:
+        KERNELS,
+    conda:
+        ENV
+    log:
+        "logs/kernels/share_{share}_of_{shares}.log",
+    threads: 1
+    # ahead of every other job: the runs then find their kernels compiled
+    priority: 100
+    shell:
+        "NUMBA_NUM_THREADS={threads} OMP_NUM_THREADS={threads} MKL_NUM_THREADS={threads} "
+        "cgfem warmup --share {wildcards.share}/{wildcards.shares} > {output}.tmp 2> {log} "
+        "&& mv {output}.tmp {output}"
+
+
 rule run_case:
     """Solve one example at one level with one surface definition. A run that fails to
     converge (exit 1, summary.json written with status "failed", or "outer_not_converged"
