@@ -247,7 +247,7 @@ def _cmd_warmup(args: argparse.Namespace) -> int:
         except RuntimeError as err:
             print(f"cgfem: error: {err}", file=sys.stderr)
             return EXIT_FAILED
-        log(f"{sum(1 for e in entries if e.types)} kernel versions, {len(entries)} entries: {args.record}")
+        log(f"{sum(1 for e in entries if e.argtypes)} kernel versions, {len(entries)} entries: {args.record}")
         return EXIT_OK
     from cgfem.warmup import warm_up
 

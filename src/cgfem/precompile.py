@@ -6,16 +6,15 @@ cache the kernels a run calls take a minute or more to compile (docs/performance
 "Compilation"). Processes started together on a cold cache (the pipeline's first jobs, the
 test suite's workers) would each compile the same kernels at the same time.
 
-:data:`MANIFEST` lists every kernel of the package, each with the argument types the warm-up
-runs (:mod:`cgfem.warmup`, on one thread) call it with, in the order their compilations ended
-and the seconds each compilation took without those of the package's kernels it calls. :func:`share` cuts it
-into ``n`` shares: walked by depth in the call graph (a kernel after the kernels it calls),
-each kernel goes to the share with the least compile time so far, so the shares take about
-the same time and reach each depth about together, and a kernel mostly finds its callees
-compiled, by its own share or another, in the cache (numba looks a callee up there before
-compiling it). :func:`compile_share`
-compiles one share. Started as ``n`` processes at once, the shares leave in the cache every
-kernel the warm-up calls, each compiled about once.
+:data:`MANIFEST` lists every kernel of the package with the argument types the warm-up runs
+(:mod:`cgfem.warmup`, on one thread) call it with, and the seconds each compilation took
+without those of the package's kernels it calls. :func:`share` cuts it into ``n`` shares:
+walked by depth in the call graph (a kernel after the kernels it calls), each kernel goes to
+the share with the least compile time so far, so that the shares take about the same time
+and reach each depth about together, and a kernel mostly finds its callees compiled, by its
+own share or another, in the cache (numba looks a callee up there before compiling it).
+:func:`compile_share` compiles one share. Started as ``n`` processes at once, the shares
+leave in the cache every kernel the warm-up calls, each compiled about once.
 
 The manifest is a hint, never a condition of a run: an entry whose kernel no longer exists or
 no longer compiles for its types is skipped (reported), and a kernel it misses compiles at its
@@ -95,13 +94,13 @@ def format_types(args: tuple) -> str:
 
 @dataclass(frozen=True)
 class Entry:
-    """A kernel (``module:qualified name``) and one version of it: ``types``, its argument
+    """A kernel (``module:qualified name``) and one version of it: ``argtypes``, its argument
     types (:func:`format_types`; "" for a kernel the warm-up does not call), and the
     ``seconds`` its compilation took without the package's kernels it calls (0 where not
     called)."""
 
     kernel: str
-    types: str = ""
+    argtypes: str = ""
     seconds: float = 0.0
 
 
@@ -158,11 +157,11 @@ def resolve(kernel: str) -> CPUDispatcher | None:
         module = importlib.import_module(module_name)
     except ImportError:
         return None
-    serial = qualname.endswith("_serial")
-    value = getattr(module, qualname.removesuffix("_serial") if serial else qualname, None)
-    for dispatcher in _dispatchers_of(value):
-        if kernel_name(dispatcher) == kernel:
-            return dispatcher
+    # a serial twin (cgfem._parallel) is an attribute of its parallel kernel's module attribute
+    for attribute in (qualname, qualname.removesuffix("_serial")):
+        for dispatcher in _dispatchers_of(getattr(module, attribute, None)):
+            if kernel_name(dispatcher) == kernel:
+                return dispatcher
     return None
 
 
@@ -187,7 +186,7 @@ def read_manifest(path: Path = MANIFEST) -> list[Entry]:
 
 def write_manifest(entries: list[Entry], path: Path) -> None:
     """Write ``entries`` one per line, tab-separated (:data:`HEADER`), atomically."""
-    lines = [HEADER] + [f"{e.kernel}\t{e.seconds:.3f}\t{e.types}" for e in entries]
+    lines = [HEADER] + [f"{e.kernel}\t{e.seconds:.3f}\t{e.argtypes}" for e in entries]
     write_text_atomic(Path(path), "\n".join(lines) + "\n")
 
 
@@ -228,7 +227,7 @@ def share(entries: list[Entry], k: int, n: int) -> list[Entry]:
     together."""
     if not 1 <= k <= n:
         raise ValueError(f"share {k} of {n}: needs 1 <= k <= n")
-    typed = [e for e in entries if e.types]
+    typed = [e for e in entries if e.argtypes]
     depth = depths(sorted({e.kernel for e in typed}))
     load = [0.0] * n
     mine = []
@@ -255,7 +254,7 @@ def compile_share(k: int, n: int, entries: list[Entry] | None = None,
             report.skipped.append(f"{entry.kernel}: no such kernel")
             continue
         try:
-            dispatcher.compile(parse_types(entry.types))
+            dispatcher.compile(parse_types(entry.argtypes))
         except Exception as err:                      # a stale entry: the kernel compiles later
             report.skipped.append(f"{entry.kernel}: {type(err).__name__}: {str(err).splitlines()[0][:200]}")
             continue

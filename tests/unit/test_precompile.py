@@ -31,10 +31,10 @@ def test_the_manifest_lists_every_kernel_of_the_package_and_no_other():
 
 def test_the_manifest_types_read_back_and_the_recorded_seconds_add_up():
     entries = read_manifest()
-    typed = [e for e in entries if e.types]
+    typed = [e for e in entries if e.argtypes]
     assert len(typed) > 100
     for entry in typed:
-        assert format_types(parse_types(entry.types)) == entry.types
+        assert format_types(parse_types(entry.argtypes)) == entry.argtypes
     # the warm-up compiles for one to a few minutes, on one thread: of a parallel kernel
     # (cgfem._parallel) the serial twin only
     assert 20.0 < sum(e.seconds for e in typed) < 600.0
@@ -74,7 +74,7 @@ def test_a_kernel_lies_deeper_in_the_call_graph_than_its_callees():
 @pytest.mark.parametrize("n", [1, 2, 3, 5])
 def test_the_shares_partition_the_typed_entries_by_depth_and_balance_them(n):
     entries = read_manifest()
-    typed = [e for e in entries if e.types]
+    typed = [e for e in entries if e.argtypes]
     depth = depths(sorted({e.kernel for e in typed}))
     shares = [share(entries, k, n) for k in range(1, n + 1)]
     assert sorted((typed.index(e) for s in shares for e in s)) == list(range(len(typed)))
