@@ -15,7 +15,8 @@ from math import factorial
 import numpy as np
 import pytest
 
-from cgfem.embedding.facets import CUT, INSIDE, OUTSIDE, facet_embedding_parts, triangle_rule
+from cgfem.embedding.facets import CUT, INSIDE, OUTSIDE, facet_embedding_parts
+from cgfem.quadrature_rules import triangle_rule
 from cgfem.embedding.grid import CartesianGrid
 from cgfem.embedding.lines import cast_lines, cast_z_lines
 from cgfem.embedding.moments import VolumeRule

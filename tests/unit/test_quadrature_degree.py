@@ -16,7 +16,8 @@ import pytest
 
 from cgfem.embedding._column_kernels import legendre_row, recombine
 from cgfem.embedding.columns import CONES, OK, LineHits, column_rules, n_gauss, n_moments
-from cgfem.embedding.facets import facet_embedding_parts, facet_surface_degree, triangle_rule
+from cgfem.embedding.facets import facet_embedding_parts, facet_surface_degree
+from cgfem.quadrature_rules import triangle_rule
 from cgfem.embedding.lines import cast_lines, cast_z_lines
 from cgfem.embedding.moments import fitted_volume_rule
 from cgfem.embedding.partition import partition_min_points, partition_surface

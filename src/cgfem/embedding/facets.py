@@ -61,6 +61,7 @@ from cgfem.geometry.bvh import SurfaceIndex
 from cgfem.geometry.inside import points_inside
 from cgfem.geometry.query import closest_points
 from cgfem.geometry.solid import Solid
+from cgfem.quadrature_rules import triangle_rule
 
 #: Element status, the values of :mod:`cgfem.embedding.quadrature` (duplicated here because
 #: that module imports this one).
@@ -83,51 +84,6 @@ def volume_surface_degree(degree: int) -> int:
     need: the column (and moment-fitting) integrand, an antiderivative of degree
     ``degree + 1`` along one axis times degree ``degree`` along the other two."""
     return 3 * degree + 1
-
-# ------------------------------------------------------------------------------------------
-# symmetric triangle rules: barycentric orbits, weights normalised to sum 1 (polished by
-# Newton on the moment equations of all monomials up to the degree)
-# ------------------------------------------------------------------------------------------
-#: degree 4, 6 points (Strang & Fix; Dunavant's rule 4): two orbits (a, a, 1 - 2a)
-_RULE4_S21 = ((0.44594849091596483, 0.22338158967801136), (0.09157621350977077, 0.10995174365532195))
-#: degree 8, 16 points (Dunavant's rule 8): centroid, three (a, a, 1 - 2a), one (a, b, 1 - a - b)
-_RULE8_S3 = 0.14431560767775461
-_RULE8_S21 = ((0.4592925882927025, 0.09509163426730695), (0.17056930775173426, 0.10321737053472947),
-              (0.050547228317032185, 0.03245849762320132))
-_RULE8_S111 = ((0.26311282963471405, 0.008394777409917169, 0.027230314174422027),)
-
-
-def _symmetric_rule(s3, s21, s111) -> tuple[np.ndarray, np.ndarray]:
-    bary, w = [], []
-    if s3 is not None:
-        bary.append([1 / 3, 1 / 3, 1 / 3])
-        w.append(s3)
-    for a, wa in s21:
-        bary += [[a, a, 1 - 2 * a], [a, 1 - 2 * a, a], [1 - 2 * a, a, a]]
-        w += [wa] * 3
-    for a, b, wab in s111:
-        c = 1 - a - b
-        bary += [[a, b, c], [a, c, b], [b, a, c], [b, c, a], [c, a, b], [c, b, a]]
-        w += [wab] * 6
-    return np.array(bary), np.array(w)
-
-
-def triangle_rule(degree: int) -> tuple[np.ndarray, np.ndarray]:
-    """A rule on triangles exact for polynomials of total ``degree``: barycentric points
-    (q, 3) and weights (q,) summing to 1 (multiply by the area). Degree <= 4: 6 points,
-    <= 8: 16 points (symmetric); higher: the collapsed (Duffy) product of Gauss-Legendre
-    rules."""
-    if degree <= 4:
-        return _symmetric_rule(None, _RULE4_S21, ())
-    if degree <= 8:
-        return _symmetric_rule(_RULE8_S3, _RULE8_S21, _RULE8_S111)
-    k = (degree + 3) // 2  # (1 - s) p(s, .) has degree degree + 1 in s: 2k - 1 >= degree + 1
-    g, gw = np.polynomial.legendre.leggauss(k)
-    g, gw = 0.5 * (g + 1.0), 0.5 * gw
-    s, t = (a.ravel() for a in np.meshgrid(g, g, indexing="ij"))
-    w = np.outer(gw, gw).ravel() * (1.0 - s) * 2.0
-    u, v = s, t * (1.0 - s)
-    return np.column_stack([1.0 - u - v, u, v]), w
 
 
 # ------------------------------------------------------------------------------------------
