@@ -20,9 +20,10 @@ RUN_ORDER = "results/runs/{case}/L{level}_{surface}_o{order}"
 #: every later run and error table on them (`cgfem run --embedding-cache`): nurbs_fe and
 #: nurbs_fit share theirs; the results are the same bits either way
 EMBEDDINGS = "results/cache/embeddings"
-#: the kernels compiled in shares before the runs (rule compile_kernels), one per core
+#: the kernels compiled in shares before the runs (rule compile_kernels), one per core the
+#: workflow may use (at most this machine's)
 KERNELS = "results/cache/kernels/share_{share}_of_{shares}.json"
-KERNEL_SHARES = max(1, int(workflow.cores or 1))
+KERNEL_SHARES = max(1, min(int(workflow.cores or 1), os.cpu_count() or 1))
 #: software of every rule (relative to the rule files)
 ENV = "../envs/cgfem.yaml"
 
