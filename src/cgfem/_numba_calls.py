@@ -29,7 +29,7 @@ from cgfem._numba_cache import PACKAGE
 _NUMBA_CALL_TEMPLATE = dispatcher.Dispatcher.get_call_template
 
 
-def _in_package(kernel: dispatcher.Dispatcher) -> bool:
+def in_package(kernel: dispatcher.Dispatcher) -> bool:
     """Whether ``kernel`` is defined in a module of this package."""
     return getattr(kernel.py_func, "__module__", "").split(".")[0] == PACKAGE
 
@@ -37,7 +37,7 @@ def _in_package(kernel: dispatcher.Dispatcher) -> bool:
 def _call_template(self: dispatcher.Dispatcher, args: tuple, kws: dict):
     """numba's ``get_call_template`` of a call to ``self``, on non-literal argument types when
     ``self`` is a kernel of this package."""
-    if _in_package(self):
+    if in_package(self):
         args = tuple(types.unliteral(a) for a in args)
         kws = {k: types.unliteral(v) for k, v in kws.items()}
     return _NUMBA_CALL_TEMPLATE(self, args, kws)

@@ -40,11 +40,12 @@ from typing import Callable
 from numba.core import types
 from numba.core.registry import CPUDispatcher
 
+from cgfem._numba_cache import PACKAGE
+from cgfem._numba_calls import in_package
 from cgfem.atomic import write_text_atomic
 
 #: the manifest shipped with the package
 MANIFEST = Path(__file__).with_name("kernels.tsv")
-PACKAGE = __name__.split(".")[0]
 #: the manifest's columns
 HEADER = "# kernel\tseconds\targument types"
 #: modules not searched for kernels: the command line's entry point, and modules that import
@@ -196,8 +197,7 @@ def callees(dispatcher: CPUDispatcher) -> set[str]:
     code, scope = dispatcher.py_func.__code__, dispatcher.py_func.__globals__
     values = [scope[name] for name in code.co_names if name in scope]
     values += [getattr(v, name, None) for v in values if isinstance(v, ModuleType) for name in code.co_names]
-    return {kernel_name(d) for v in values for d in _dispatchers_of(v)
-            if kernel_name(d).startswith(f"{PACKAGE}.") and d is not dispatcher}
+    return {kernel_name(d) for v in values for d in _dispatchers_of(v) if in_package(d) and d is not dispatcher}
 
 
 def depths(kernels: list[str]) -> dict[str, int]:
@@ -269,10 +269,11 @@ def record(path: Path, log: Callable[[str], None] | None = None) -> list[Entry]:
     """Write a manifest of what the warm-up compiles to ``path``: the warm-up runs, on one
     thread, in a new process with an empty temporary cache, which records every compilation
     (:func:`_record_here`). Raises RuntimeError if that process fails."""
+    from cgfem.run import THREAD_COUNTS
+
     log = log or (lambda message: None)
     with tempfile.TemporaryDirectory(prefix="cgfem-record-") as cache:
-        env = {**os.environ, "NUMBA_CACHE_DIR": cache, "NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
-               "MKL_NUM_THREADS": "1"}
+        env = {**os.environ, **dict.fromkeys(THREAD_COUNTS, "1"), "NUMBA_CACHE_DIR": cache}
         log(f"compiling the warm-up from an empty cache into {path}")
         done = subprocess.run([sys.executable, "-c", f"from {__name__} import _record_here; _record_here({str(path)!r})"],
                               env=env, capture_output=True, text=True)
@@ -292,19 +293,19 @@ def _record_here(path: str) -> None:
         warm_up()
     # a kernel's seconds leave out its package callees' compilations and keep numba's own
     # functions' (compiled once per process, by the first kernel that needs them)
-    stack, done = [], {}          # stack: [key, start, callees' time]; done: key -> seconds
+    stack, done = [], {}          # stack: [key, start, package callees' time]; done: key -> seconds
     for stamp, ev in recorder.buffer:
         key = (ev.data["dispatcher"], tuple(ev.data["args"]))
         if ev.is_start:
             stack.append([key, stamp, 0.0])
             continue
-        key, begun, callees = stack.pop()
+        key, begun, inner = stack.pop()
         elapsed = stamp - begun
-        ours = kernel_name(key[0]).startswith(f"{PACKAGE}.")
+        ours = in_package(key[0])
         if stack and ours:
             stack[-1][2] += elapsed
         if ours and key not in done:
-            done[key] = elapsed - callees
+            done[key] = elapsed - inner
     entries = []
     for (dispatcher, args), seconds in done.items():
         try:
