@@ -30,6 +30,20 @@ import pytest
 if "PYTEST_XDIST_WORKER" in os.environ:
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
+from tests.support import schedule  # noqa: E402  (imports cgfem, and so numba: after the line above)
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption("--record-file-seconds", action="store_true",
+                     help=f"write each test file's seconds in this run to {schedule.SECONDS} (the order "
+                          "pytest-xdist's workers take the files in: tests/support/schedule.py)")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    # under pytest-xdist the files go to the workers longest first (tests/support/schedule.py)
+    if "PYTEST_XDIST_WORKER" in os.environ:
+        schedule.order_items(items, schedule.read_seconds())
+
 
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "slow: solves a whole problem or builds large embeddings (deselect with -m 'not slow')")
@@ -37,6 +51,13 @@ def pytest_configure(config: pytest.Config) -> None:
     # each worker first compiles its share of the kernels (cgfem.precompile): on a cold cache
     # the workers would otherwise each compile nearly all of them in their first tests; on a
     # warm one this loads the share from the cache
+    if not hasattr(config, "workerinput"):              # not a worker: pytest-xdist's controller or alone
+        # the queue of files keeps the workers' order (pytest-xdist would sort it by the number
+        # of tests in a file)
+        if hasattr(config.option, "loadscopereorder"):
+            config.option.loadscopereorder = False
+        if config.getoption("record_file_seconds"):
+            config.pluginmanager.register(schedule.FileSeconds(schedule.SECONDS), "file-seconds")
     worker = os.environ.get("PYTEST_XDIST_WORKER")       # gw0, gw1, ...
     if worker is not None:
         from cgfem.precompile import compile_share

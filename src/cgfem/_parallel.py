@@ -22,6 +22,9 @@ from typing import Callable
 
 import numba
 
+#: the end of a serial twin's qualified name
+SERIAL_SUFFIX = "_serial"
+
 
 def parallel_kernel(fn: Callable) -> Callable:
     """``fn`` compiled with ``numba.njit(cache=True, parallel=True)`` and, as its serial twin,
@@ -30,7 +33,7 @@ def parallel_kernel(fn: Callable) -> Callable:
     numba dispatchers."""
     parallel = numba.njit(cache=True, parallel=True)(fn)
     twin = types.FunctionType(fn.__code__, fn.__globals__, fn.__name__, fn.__defaults__, fn.__closure__)
-    twin.__qualname__ = f"{fn.__qualname__}_serial"
+    twin.__qualname__ = f"{fn.__qualname__}{SERIAL_SUFFIX}"
     twin.__module__ = fn.__module__
     twin.__doc__ = fn.__doc__
     serial = numba.njit(cache=True)(twin)

@@ -14,7 +14,10 @@ the share with the least compile time so far, so that the shares take about the 
 and reach each depth about together, and a kernel mostly finds its callees compiled, by its
 own share or another, in the cache (numba looks a callee up there before compiling it).
 :func:`compile_share` compiles one share. Started as ``n`` processes at once, the shares
-leave in the cache every kernel the warm-up calls, each compiled about once.
+leave in the cache every kernel the warm-up calls, each compiled about once. A run on several
+threads calls the parallel kernels (:mod:`cgfem._parallel`) where the one-thread warm-up
+called their serial twins: :func:`parallel_versions` names their versions for
+:func:`compile_share` (the tests that start two-thread runs compile them so, once).
 
 The manifest is a hint, never a condition of a run: an entry whose kernel no longer exists or
 no longer compiles for its types is skipped (reported), and a kernel it misses compiles at its
@@ -42,6 +45,7 @@ from numba.core.registry import CPUDispatcher
 
 from cgfem._numba_cache import PACKAGE
 from cgfem._numba_calls import in_package
+from cgfem._parallel import SERIAL_SUFFIX
 from cgfem.atomic import write_text_atomic
 
 #: the manifest shipped with the package
@@ -159,7 +163,7 @@ def resolve(kernel: str) -> CPUDispatcher | None:
     except ImportError:
         return None
     # a serial twin (cgfem._parallel) is an attribute of its parallel kernel's module attribute
-    for attribute in (qualname, qualname.removesuffix("_serial")):
+    for attribute in (qualname, qualname.removesuffix(SERIAL_SUFFIX)):
         for dispatcher in _dispatchers_of(getattr(module, attribute, None)):
             if kernel_name(dispatcher) == kernel:
                 return dispatcher
@@ -237,6 +241,15 @@ def share(entries: list[Entry], k: int, n: int) -> list[Entry]:
         if target == k - 1:
             mine.append(entry)
     return mine
+
+
+def parallel_versions(entries: list[Entry]) -> list[Entry]:
+    """The entries of the serial twins (:mod:`cgfem._parallel`, names ending in
+    :data:`~cgfem._parallel.SERIAL_SUFFIX`) named for their parallel kernels, with the twins'
+    argument types and recorded seconds: the versions a run on several threads calls where the
+    manifest's one-thread warm-up called the twins."""
+    return [Entry(e.kernel.removesuffix(SERIAL_SUFFIX), e.argtypes, e.seconds) for e in entries
+            if e.argtypes and e.kernel.endswith(SERIAL_SUFFIX)]
 
 
 def compile_share(k: int, n: int, entries: list[Entry] | None = None,

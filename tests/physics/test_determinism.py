@@ -6,6 +6,10 @@ definition: two runs with two threads each, started together so that each loads 
 machine under the other, must write the same summary numbers and the same VTU fields to the
 last bit; a third run with one thread must take the same Newton iterations and active
 points in every step, with reactions equal to 1e-10.
+
+The two-thread runs call the parallel kernels (cgfem._parallel), which the suite's one-thread
+workers and their warm-up shares do not compile: this module compiles them first, once, so
+that the two runs started together load them instead of each compiling them.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ import meshio
 import numpy as np
 import pytest
 
+from cgfem.precompile import compile_share, parallel_versions, read_manifest
 from cgfem.results import stable
 from cgfem.run import THREAD_COUNTS
 from tests.support.paths import CASES
@@ -33,6 +38,14 @@ RUNS = [pytest.param("smoke/chain2_steel.yaml", s, marks=pytest.mark.long, id=f"
         for s in ("facets", "nurbs_fe", "nurbs_fit")] \
     + [pytest.param("chain3.yaml", s, id=f"chain3-{s}", marks=pytest.mark.long if s == "nurbs_fit" else ())
        for s in ("facets", "nurbs_fe", "nurbs_fit")]
+
+
+@pytest.fixture(scope="module", autouse=True)
+def parallel_kernels_compiled():
+    """The parallel kernels' versions the warm-up's runs would call on several threads, in the
+    numba cache the runs started here read."""
+    report = compile_share(1, 1, parallel_versions(read_manifest()))
+    assert report.compiled > 5 and not report.skipped, report.skipped
 
 
 def start(case: str, surface: str, out: Path, threads: int) -> subprocess.Popen:

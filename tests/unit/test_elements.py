@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import vtk
+from vtkmodules.vtkCommonDataModel import vtkHexahedron, vtkTriQuadraticHexahedron
 
 from cgfem.embedding.grid import CartesianGrid
 from cgfem.fem.element import HEX8, HEX27, ORDERS, hexahedron
@@ -29,7 +29,7 @@ def test_orders_and_counts():
 def test_nodes_and_shape_functions_are_vtks():
     """Node positions and shape functions equal VTK's hexahedron and triquadratic hexahedron
     (its parametric cube is [0, 1]^3)."""
-    for element, cell in ((HEX8, vtk.vtkHexahedron()), (HEX27, vtk.vtkTriQuadraticHexahedron())):
+    for element, cell in ((HEX8, vtkHexahedron()), (HEX27, vtkTriQuadraticHexahedron())):
         pcoords = cell.GetParametricCoords()
         nodes = np.array([pcoords[i] for i in range(3 * element.n_nodes)]).reshape(-1, 3)
         assert np.array_equal(2.0 * nodes - 1.0, element.node_xi)

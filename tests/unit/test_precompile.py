@@ -9,8 +9,8 @@ import pytest
 from numba.core import types
 
 from cgfem.cli import main
-from cgfem.precompile import (Entry, callees, compile_share, depths, format_types, package_kernels, parse_types,
-                              read_manifest, resolve, share, write_manifest)
+from cgfem.precompile import (Entry, callees, compile_share, depths, format_types, package_kernels,
+                              parallel_versions, parse_types, read_manifest, resolve, share, write_manifest)
 
 RECORD = "cgfem warmup --record src/cgfem/kernels.tsv"
 
@@ -99,6 +99,19 @@ def test_a_share_compiles_its_versions_and_skips_stale_entries():
     assert "no such kernel" in report.skipped[0] and "Signature mismatch" in report.skipped[1]
     # the second of two shares gets the entries the first did not
     assert [e.kernel for e in share(entries, 2, 2)] == [f"{__name__}:_gone"]
+
+
+def test_the_parallel_versions_are_the_twins_kernels_with_the_twins_types():
+    entries = read_manifest()
+    twins = {e.kernel: e for e in entries if e.argtypes and e.kernel.endswith("_serial")}
+    versions = parallel_versions(entries)
+    assert len(versions) == len(twins) > 5
+    for entry in versions:
+        twin = twins[f"{entry.kernel}_serial"]
+        assert (entry.argtypes, entry.seconds) == (twin.argtypes, twin.seconds)
+        parallel, serial = resolve(entry.kernel), resolve(twin.kernel)
+        assert parallel.targetoptions.get("parallel") and not serial.targetoptions.get("parallel")
+        assert parallel.py_func.__code__ is serial.py_func.__code__
 
 
 def test_the_manifest_file_round_trips(tmp_path):
