@@ -48,18 +48,18 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "slow: solves a whole problem or builds large embeddings (deselect with -m 'not slow')")
     config.addinivalue_line("markers", "long: an acceptance run of minutes, left out by default (run with -m long)")
-    if not hasattr(config, "workerinput"):              # not a worker: pytest-xdist's controller or alone
+    worker = os.environ.get("PYTEST_XDIST_WORKER")       # gw0, gw1, ...; None: the controller or alone
+    if worker is None:
         # the queue of files keeps the workers' order (pytest-xdist would sort it by the number
         # of tests in a file)
         if hasattr(config.option, "loadscopereorder"):
             config.option.loadscopereorder = False
         if config.getoption("record_file_seconds"):
             config.pluginmanager.register(schedule.FileSeconds(schedule.SECONDS), "file-seconds")
+        return
     # each worker first compiles its share of the kernels (cgfem.precompile): on a cold cache
     # the workers would otherwise each compile nearly all of them in their first tests; on a
     # warm one this loads the share from the cache
-    worker = os.environ.get("PYTEST_XDIST_WORKER")       # gw0, gw1, ...
-    if worker is not None:
-        from cgfem.precompile import compile_share
+    from cgfem.precompile import compile_share
 
-        compile_share(int(worker.removeprefix("gw")) + 1, int(os.environ["PYTEST_XDIST_WORKER_COUNT"]))
+    compile_share(int(worker.removeprefix("gw")) + 1, int(os.environ["PYTEST_XDIST_WORKER_COUNT"]))

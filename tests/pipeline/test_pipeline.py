@@ -76,7 +76,7 @@ def expected_order2_runs(config: dict, smoke: dict | None = None) -> set[str]:
 def test_smoke_plan_has_every_rule_once_per_job(workdir):
     config = yaml.safe_load((REPO / "config" / "smoke.yaml").read_text())
     jobs = planned_jobs(dry_run(workdir, "--configfile", "config/smoke.yaml"))
-    assert jobs.pop("compile_kernels") == min(2, os.cpu_count() or 1)     # one per core: below
+    jobs.pop("compile_kernels")                         # one per core: checked below
     n_planar = len(config["examples"]["planar"]["levels"]) * len(config["surfaces"])
     assert jobs == {"all": 1, "check_case": 4, "run_case": expected_runs(config), "planar_reference": 1,
                     "run_case_order": 1, "planar_errors": n_planar, "claims": 1, **{f: 1 for f in FIGURES}}

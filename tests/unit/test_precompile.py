@@ -3,6 +3,8 @@ and ``cgfem warmup --share`` / ``--record`` at the command line."""
 
 from __future__ import annotations
 
+import json
+
 import numba
 import numpy as np
 import pytest
@@ -131,6 +133,6 @@ def test_bad_share_or_record_is_a_one_line_error(argv, capsys):
 def test_warmup_share_prints_what_it_compiled(capsys):
     assert main(["warmup", "--share", "4/4"]) == 0
     out = capsys.readouterr().out
-    report = __import__("json").loads(out)
+    report = json.loads(out)
     assert report["share"] == 4 and report["shares"] == 4 and report["skipped"] == []
     assert report["compiled"] == len(share(read_manifest(), 4, 4)) > 10
