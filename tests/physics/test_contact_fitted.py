@@ -155,6 +155,35 @@ def test_merged_columns_move_points_as_the_raw_basis():
     assert merged_nodes.shape[1] == max(np.unique(nodes[i][valid[i]]).size for i in range(n))
 
 
+def test_merged_columns_sum_equal_controls_in_column_order_and_pad_with_the_first():
+    """Bit for bit the sums of a plain loop over each row's columns (from 0.0, in column
+    order), the controls ascending, rows padded with their smallest control and 0; a row
+    with no valid entry with :data:`~cgfem.contact._fit_kernels.NO_CONTROL`."""
+    from cgfem.contact._fit_kernels import NO_CONTROL
+    rng = np.random.default_rng(5)
+    n, w = 30, 10
+    nodes = rng.integers(0, 5, (n, w))
+    coef = rng.normal(size=(n, 2, w))
+    valid = rng.random((n, w)) < 0.7
+    valid[0] = False
+    merged_nodes, merged_coef = merge_columns(nodes, coef, valid)
+    width = merged_nodes.shape[1]
+    for p in range(n):
+        sums: dict[int, list[float]] = {}
+        for a in range(w):
+            if valid[p, a]:
+                row = sums.setdefault(int(nodes[p, a]), [0.0, 0.0])
+                row[0] += coef[p, 0, a]
+                row[1] += coef[p, 1, a]
+        controls = sorted(sums)
+        pad = controls[0] if controls else NO_CONTROL
+        expected = np.array(controls + [pad] * (width - len(controls)))
+        expected_coef = np.zeros((2, width))
+        expected_coef[:, :len(controls)] = np.array([sums[c] for c in controls]).T.reshape(2, -1)
+        assert np.array_equal(merged_nodes[p], expected)
+        assert np.array_equal(merged_coef[p], expected_coef)
+
+
 def test_the_basis_in_chunks_is_the_basis_at_once(monkeypatch):
     """The fitted surface evaluates its basis a chunk of points at a time: the reference
     geometry, coefficients and controls of the sphere's seeds are those of one evaluation,

@@ -126,6 +126,12 @@ def test_banded_cholesky_equals_dense_solve():
     assert band_order(n_u, n_v, (2, 2))[1] == n_v     # v-major: the smaller band (2 n_u + 2 < 2 n_v + 2)
     with pytest.raises(np.linalg.LinAlgError):
         BandedCholesky.of(A - 100.0 * np.eye(n_u * n_v), np.arange(n_u * n_v))
+    # three columns (their own loops) give the bits of each column alone and of the same
+    # columns among four (the general loops)
+    x3 = f.solve(b)
+    for c in range(3):
+        assert np.array_equal(f.solve(b[:, c]), x3[:, c])
+    assert np.array_equal(f.solve(np.column_stack([b, b[:, 0]]))[:, :3], x3)
 
 
 # -- M and G ----------------------------------------------------------------------------

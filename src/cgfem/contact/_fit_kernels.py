@@ -107,10 +107,32 @@ def banded_cholesky(lb):
 @njit(cache=True)
 def banded_cholesky_solve(lb, b):
     """Solve ``L L^T x = b`` in place for ``b`` (n, m) with the factor of
-    :func:`banded_cholesky`."""
+    :func:`banded_cholesky`. Each entry of ``x`` takes the same operations in the same order
+    for any ``m``; three columns (a fit's x, y, z) run in registers, about three times as
+    fast as the general loops."""
     n = lb.shape[0]
     bw = lb.shape[1] - 1
     m = b.shape[1]
+    if m == 3:
+        for j in range(n):                      # L y = b
+            d = lb[j, 0]
+            x0, x1, x2 = b[j, 0] / d, b[j, 1] / d, b[j, 2] / d
+            b[j, 0], b[j, 1], b[j, 2] = x0, x1, x2
+            for i in range(j + 1, min(n, j + bw + 1)):
+                lij = lb[j, i - j]
+                b[i, 0] -= lij * x0
+                b[i, 1] -= lij * x1
+                b[i, 2] -= lij * x2
+        for j in range(n - 1, -1, -1):          # L^T x = y
+            s0, s1, s2 = b[j, 0], b[j, 1], b[j, 2]
+            for i in range(j + 1, min(n, j + bw + 1)):
+                lij = lb[j, i - j]
+                s0 -= lij * b[i, 0]
+                s1 -= lij * b[i, 1]
+                s2 -= lij * b[i, 2]
+            d = lb[j, 0]
+            b[j, 0], b[j, 1], b[j, 2] = s0 / d, s1 / d, s2 / d
+        return
     for j in range(n):                      # L y = b
         for c in range(m):
             b[j, c] /= lb[j, 0]
@@ -125,3 +147,50 @@ def banded_cholesky_solve(lb, b):
                 b[j, c] -= lij * b[i, c]
         for c in range(m):
             b[j, c] /= lb[j, 0]
+
+
+#: a row's node where it has no valid entry (:func:`merge_controls`)
+NO_CONTROL = np.iinfo(np.int64).max
+
+
+@njit(cache=True)
+def merge_controls(nodes, coef, valid):
+    """Per row ``p``, the distinct values among ``nodes[p]`` (n, W) where ``valid[p]``
+    (n, W), ascending, with the coefficients ``coef[p]`` (n, r, W) of equal values summed in
+    their column order (from 0.0): returns ``(merged nodes (n, W'), merged coef (n, r, W'))``,
+    ``W'`` the largest count of distinct values of a row (at least 1). Shorter rows are
+    padded with their smallest value (:data:`NO_CONTROL` if they have none) and coefficient 0."""
+    n, w = nodes.shape
+    r = coef.shape[1]
+    order = np.empty((n, w), np.int64)            # each row's valid columns by value, stable
+    live = np.zeros(n, np.int64)
+    width = 1
+    for p in range(n):
+        k = 0
+        for a in range(w):
+            if valid[p, a]:
+                i = k
+                while i > 0 and nodes[p, order[p, i - 1]] > nodes[p, a]:
+                    order[p, i] = order[p, i - 1]
+                    i -= 1
+                order[p, i] = a
+                k += 1
+        live[p] = k
+        distinct = 0
+        for t in range(k):
+            if t == 0 or nodes[p, order[p, t]] != nodes[p, order[p, t - 1]]:
+                distinct += 1
+        width = max(width, distinct)
+    merged = np.empty((n, width), np.int64)
+    summed = np.zeros((n, r, width))
+    for p in range(n):
+        merged[p, :] = nodes[p, order[p, 0]] if live[p] > 0 else NO_CONTROL
+        g = -1
+        for t in range(live[p]):
+            a = order[p, t]
+            if t == 0 or nodes[p, a] != nodes[p, order[p, t - 1]]:
+                g += 1
+                merged[p, g] = nodes[p, a]
+            for c in range(r):
+                summed[p, c, g] += coef[p, c, a]
+    return merged, summed

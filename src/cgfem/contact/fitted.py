@@ -35,6 +35,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from cgfem.contact._fit_kernels import merge_controls
 from cgfem.contact.fit import PatchFit, surface_basis
 from cgfem.contact.kinematics import MasterPoints, SlaveFrames
 from cgfem.contact.surfaces import RAY_TOL, RaySurface, locate_points, pack_patches
@@ -74,27 +75,12 @@ def merge_columns(nodes: np.ndarray, coef: np.ndarray, valid: np.ndarray) -> tup
     """Per point, the distinct controls among ``nodes`` (n, W) where ``valid`` (n, W), with
     the coefficients ``coef`` (n, 6, W) of equal controls summed: (n, W') and (n, 6, W'), W'
     the largest count of distinct controls of a point; shorter rows are padded with their
-    first control and coefficient 0. A fitted point's (p+1)(q+1) controls each spread over
-    the free controls tied to them (at double knots and seams): 36 entries with biquadratic
-    patches, 9 distinct, and the tangent's blocks shrink by (36/9)^2."""
-    n, w = nodes.shape
-    last = np.iinfo(np.int64).max
-    key = np.where(valid, nodes, last)
-    order = np.argsort(key, axis=1, kind="stable")
-    key = np.take_along_axis(key, order, axis=1)
-    coef = np.take_along_axis(coef, order[:, None, :], axis=2)
-    real = key != last
-    new = np.ones((n, w), bool)
-    new[:, 1:] = key[:, 1:] != key[:, :-1]
-    new &= real
-    group = np.cumsum(new, axis=1) - 1
-    width = max(int(new.sum(axis=1).max(initial=1)), 1)
-    rows = np.broadcast_to(np.arange(n)[:, None], (n, w))
-    out_nodes = np.repeat(key[:, :1], width, axis=1)
-    out_nodes[rows[real], group[real]] = key[real]
-    out = np.zeros((n * width, coef.shape[1]))
-    np.add.at(out, (rows * width + group)[real], np.moveaxis(coef, 2, 1)[real])
-    return out_nodes, np.moveaxis(out.reshape(n, width, -1), 1, 2).copy()
+    first control and coefficient 0 (:func:`cgfem.contact._fit_kernels.merge_controls`). A
+    fitted point's (p+1)(q+1) controls each spread over the free controls tied to them (at
+    double knots and seams): 36 entries with biquadratic patches, 9 distinct, and the
+    tangent's blocks shrink by (36/9)^2."""
+    return merge_controls(np.ascontiguousarray(nodes, dtype=np.int64), np.ascontiguousarray(coef, dtype=np.float64),
+                          np.ascontiguousarray(valid, dtype=np.bool_))
 
 
 #: points whose basis :meth:`FittedSurface._basis` evaluates at once
