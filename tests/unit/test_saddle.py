@@ -176,6 +176,13 @@ def test_rows_of_the_fit_are_computed_once_per_control():
     assert solved == [3, 2]
     np.testing.assert_allclose(more[[1, 3, 7, 8, 20]], dense[[1, 3, 7, 8, 20]], rtol=0, atol=1e-14)
     assert c.truncated_rows(np.zeros(0, np.int64), DROP).nnz == 0
+    # computed on the nodes G reaches only: bit for bit the product with all of G's columns
+    assert np.diff(c.G.tocsc().indptr).min() == 0
+    E = np.zeros((c.M.shape[0], 3))
+    E[[3, 7, 8], np.arange(3)] = 1.0
+    full = np.asarray(c.G.T @ solve_M(E)).T
+    full[np.abs(full) < DROP * np.abs(full).max(axis=1, keepdims=True)] = 0.0
+    assert np.array_equal(first[[3, 7, 8]], full)
 
 
 @pytest.mark.parametrize("symmetric", [True, False])

@@ -81,16 +81,21 @@ class FitConstraint:
             return sp.csr_matrix((m, n_nodes))
         kept = self._rows.setdefault(drop, {})
         missing = np.array([i for i in controls.tolist() if i not in kept], np.int64)
-        for start in range(0, missing.size, ROW_CHUNK):
-            chunk = missing[start:start + ROW_CHUNK]
-            E = np.zeros((m, chunk.size))
-            E[chunk, np.arange(chunk.size)] = 1.0
-            rows = np.asarray(self.G.T @ self.solve_M(E)).T                   # (chunk, n_nodes)
-            rows[np.abs(rows) < drop * np.abs(rows).max(axis=1, keepdims=True)] = 0.0
-            rows = sp.csr_matrix(rows)
-            for k, i in enumerate(chunk.tolist()):
-                a, b = rows.indptr[k], rows.indptr[k + 1]
-                kept[i] = (rows.indices[a:b].copy(), rows.data[a:b].copy())
+        if missing.size:
+            # the nodes G reaches (those near the patch): the rows are zero elsewhere, and the
+            # product on these columns alone sums the same entries in the same order
+            reached = np.flatnonzero(np.bincount(self.G.indices, minlength=n_nodes)).astype(self.G.indices.dtype)
+            G_reached = self.G[:, reached]
+            for start in range(0, missing.size, ROW_CHUNK):
+                chunk = missing[start:start + ROW_CHUNK]
+                E = np.zeros((m, chunk.size))
+                E[chunk, np.arange(chunk.size)] = 1.0
+                rows = np.asarray(G_reached.T @ self.solve_M(E)).T                # (chunk, reached)
+                rows[np.abs(rows) < drop * np.abs(rows).max(axis=1, keepdims=True)] = 0.0
+                rows = sp.csr_matrix(rows)
+                for k, i in enumerate(chunk.tolist()):
+                    a, b = rows.indptr[k], rows.indptr[k + 1]
+                    kept[i] = (reached[rows.indices[a:b]], rows.data[a:b].copy())
         counts = np.zeros(m + 1, np.int64)                 # row i's entries at i + 1
         counts[np.asarray(controls, np.int64) + 1] = [kept[i][0].size for i in controls.tolist()]
         indices = np.concatenate([kept[i][0] for i in controls.tolist()])
