@@ -108,8 +108,8 @@ def banded_cholesky(lb):
 def banded_cholesky_solve(lb, b):
     """Solve ``L L^T x = b`` in place for ``b`` (n, m) with the factor of
     :func:`banded_cholesky`. Each entry of ``x`` takes the same operations in the same order
-    for any ``m``; three columns (a fit's x, y, z) run in registers, about three times as
-    fast as the general loops."""
+    for any ``m``; with three columns (a fit's x, y, z) their running values stay in
+    registers."""
     n = lb.shape[0]
     bw = lb.shape[1] - 1
     m = b.shape[1]
