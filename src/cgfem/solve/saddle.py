@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -60,7 +61,7 @@ class FitConstraint:
     dofs (node-major), ``M`` (m, m), ``G`` (m, n_nodes), ``solve_M`` (``M^-1``, per
     column of an (m, k) array), ``scale`` ``s``. ``M`` and ``G`` are fixed for a run, so
     the rows of ``C = M^-1 G`` the preconditioners ask for are computed once
-    (:meth:`truncated_rows`)."""
+    (:meth:`truncated_rows`, on the nodes ``G`` reaches: :attr:`_reached`)."""
 
     z: np.ndarray
     mu: np.ndarray
@@ -70,6 +71,14 @@ class FitConstraint:
     solve_M: object
     scale: float
     _rows: dict = field(default_factory=dict, repr=False, compare=False)
+
+    @cached_property
+    def _reached(self) -> tuple[np.ndarray, sp.csr_matrix]:
+        """The nodes ``G`` reaches (those near the patch; sorted) and ``G`` on their columns
+        (m, reached). The rows of ``C`` are zero on the other nodes, and ``G``'s product on
+        these columns alone sums the same entries in the same order as on all of them."""
+        reached = np.flatnonzero(np.bincount(self.G.indices, minlength=self.G.shape[1]))
+        return reached.astype(self.G.indices.dtype), self.G[:, reached]
 
     def truncated_rows(self, controls: np.ndarray, drop: float) -> sp.csr_matrix:
         """The rows of ``C = M^-1 G`` of ``controls`` (sorted, unique), without entries
@@ -81,21 +90,17 @@ class FitConstraint:
             return sp.csr_matrix((m, n_nodes))
         kept = self._rows.setdefault(drop, {})
         missing = np.array([i for i in controls.tolist() if i not in kept], np.int64)
-        if missing.size:
-            # the nodes G reaches (those near the patch): the rows are zero elsewhere, and the
-            # product on these columns alone sums the same entries in the same order
-            reached = np.flatnonzero(np.bincount(self.G.indices, minlength=n_nodes)).astype(self.G.indices.dtype)
-            G_reached = self.G[:, reached]
-            for start in range(0, missing.size, ROW_CHUNK):
-                chunk = missing[start:start + ROW_CHUNK]
-                E = np.zeros((m, chunk.size))
-                E[chunk, np.arange(chunk.size)] = 1.0
-                rows = np.asarray(G_reached.T @ self.solve_M(E)).T                # (chunk, reached)
-                rows[np.abs(rows) < drop * np.abs(rows).max(axis=1, keepdims=True)] = 0.0
-                rows = sp.csr_matrix(rows)
-                for k, i in enumerate(chunk.tolist()):
-                    a, b = rows.indptr[k], rows.indptr[k + 1]
-                    kept[i] = (reached[rows.indices[a:b]], rows.data[a:b].copy())
+        reached, G_reached = self._reached
+        for start in range(0, missing.size, ROW_CHUNK):
+            chunk = missing[start:start + ROW_CHUNK]
+            E = np.zeros((m, chunk.size))
+            E[chunk, np.arange(chunk.size)] = 1.0
+            rows = np.asarray(G_reached.T @ self.solve_M(E)).T                    # (chunk, reached)
+            rows[np.abs(rows) < drop * np.abs(rows).max(axis=1, keepdims=True)] = 0.0
+            rows = sp.csr_matrix(rows)
+            for k, i in enumerate(chunk.tolist()):
+                a, b = rows.indptr[k], rows.indptr[k + 1]
+                kept[i] = (reached[rows.indices[a:b]], rows.data[a:b].copy())
         counts = np.zeros(m + 1, np.int64)                 # row i's entries at i + 1
         counts[np.asarray(controls, np.int64) + 1] = [kept[i][0].size for i in controls.tolist()]
         indices = np.concatenate([kept[i][0] for i in controls.tolist()])
