@@ -1,6 +1,8 @@
-"""Numba kernel of the rational basis functions of a NURBS surface and their parametric
-derivatives up to second order, at many points (the basis of the fitted contact surface,
-:mod:`cgfem.contact.fit`).
+"""Numba kernels of the fitted contact surface (:mod:`cgfem.contact.fit`,
+:mod:`cgfem.contact.fitted`): the rational basis functions of a NURBS surface and their
+parametric derivatives up to second order at many points (:func:`rational_basis_batch`), the
+banded Cholesky factorization and solve of a fit's matrix ``M``, and the merge of a point's
+equal controls (:func:`merge_controls`).
 
 The B-spline factors come from A2.1 FindSpan and A2.3 DersBasisFuns of
 :mod:`cgfem.geometry._nurbs_kernels`; the rational functions
