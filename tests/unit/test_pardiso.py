@@ -110,3 +110,82 @@ def test_a_solver_of_another_size_or_type_lends_nothing(cube):
     s3 = linear.build(small, "pardiso", symmetric=True, reuse=s1)
     assert s3.info["analysed"]
     assert np.linalg.norm(cube @ s1.solve(b) - b) <= 1e-8 * np.linalg.norm(b)
+
+
+def floating_pair(cube: sp.csr_matrix, shift: float) -> sp.csr_matrix:
+    """Two copies of the clamped cube, the second's clamp released to a diagonal ``shift``
+    (a fraction of its diagonal: a body held only weakly, as a floating body's stabilized
+    tangent) and tied to the first by one stiff spring: nearly singular for a small shift."""
+    free = fx.stiffness(4, 4, 4)
+    free = (free + sp.diags(shift * free.diagonal())).tocsr()
+    M = sp.block_diag([cube, free], format="csr")
+    return coupled(M, [(cube.shape[0] - 1, cube.shape[0] + 1)], 1e-3 * cube.diagonal().max())
+
+
+@pytest.mark.parametrize("symmetric", [True, False])
+def test_single_precision_factors_are_refined_to_the_check_in_double(cube, symmetric):
+    """Factors in single precision: their own solution has the residual of float32 (far above
+    the double factors' round-off), one or two steps of refinement in double bring it below
+    the check, and the solution is the double factors' to that accuracy; the same matrices in
+    the same order give the same bits again."""
+    K = cube if symmetric else (cube + sp.triu(cube, 1) * 1e-3).tocsr()
+    M = coupled(K, [(0, 500), (3, 400)], 10.0)   # springs of 27 times the largest diagonal
+    b = np.random.default_rng(4).standard_normal(M.shape[0])
+    double = linear.build(M, "pardiso", symmetric=symmetric)
+    single = linear.build(M, "pardiso", symmetric=symmetric, single=True)
+    assert (double.info["precision"], single.info["precision"]) == ("double", "single")
+    raw = single.solve_unchecked(b)
+    assert 1e-10 < np.linalg.norm(M @ raw - b) / np.linalg.norm(b) < 1e-5
+    x, reference = single.solve(b), double.solve(b)
+    assert double.info["iterations"][-1] == 0 < single.info["iterations"][-1] <= 2
+    assert single.info["residuals"][-1] <= linear.DIRECT_CHECK
+    assert np.linalg.norm(M @ x - b) <= linear.DIRECT_CHECK * np.linalg.norm(b)
+    assert np.abs(x - reference).max() <= 1e-6 * np.abs(reference).max()
+    again = linear.build(M, "pardiso", symmetric=symmetric, single=True)
+    assert np.array_equal(again.solve(b), x)
+
+
+def test_single_factors_that_fall_short_are_factorized_again_in_double(cube):
+    """A nearly singular matrix (a weakly held body, shift 1e-7 of its diagonal): refinement
+    with single-precision factors cannot reach the check, so the matrix is factorized again in
+    double precision, which solves it; a solver of the other precision lends no analysis."""
+    M = floating_pair(cube, 1e-7)
+    b = np.random.default_rng(5).standard_normal(M.shape[0])
+    solver = linear.build(M, "pardiso", symmetric=True, single=True)
+    raw = solver.solve_unchecked(b)
+    assert np.linalg.norm(M @ raw - b) > 1e3 * linear.DIRECT_CHECK * np.linalg.norm(b)
+    x = solver.solve(b)
+    assert solver.info["precision"] == "double after single"
+    assert np.linalg.norm(M @ x - b) <= linear.DIRECT_CHECK * np.linalg.norm(b)
+    nxt = linear.build(M, "pardiso", symmetric=True, reuse=solver)    # double: takes the analysis
+    assert not nxt.info["analysed"]
+    other = linear.build(M, "pardiso", symmetric=True, single=True, reuse=nxt)
+    assert other.info["analysed"]
+    assert np.linalg.norm(M @ nxt.solve(b) - b) <= 1e-8 * np.linalg.norm(b)
+
+
+def test_newtons_solves_take_single_factors_until_one_falls_short(cube):
+    """:class:`LinearSolves` (the direct path) factorizes in single precision where no body
+    floats and the policy asks for it; after a matrix that needed double factors, every later
+    matrix gets them at once (logged); a system with a floating body, or the policy
+    ``factor_precision="double"``, always gets double factors."""
+    from dataclasses import replace
+
+    from cgfem.solve.policy import SolverPolicy
+    from cgfem.solve.solves import LinearSolves
+
+    good, bad = coupled(cube, [(0, 500)], 10.0), floating_pair(cube, 1e-7)
+    lines: list[str] = []
+    solves = LinearSolves("auto", None, log=lines.append)
+    precisions = []
+    for M in (good, bad, good):
+        b = np.random.default_rng(6).standard_normal(M.shape[0])
+        x = solves(M, b)
+        assert np.linalg.norm(M @ x - b) <= linear.DIRECT_CHECK * np.linalg.norm(b)
+        precisions.append(solves._factor.info["precision"])
+    assert precisions == ["single", "double after single", "double"]
+    assert sum("double precision" in line for line in lines) == 1
+    for kwargs in ({"floating": True}, {"policy": replace(SolverPolicy(), factor_precision="double")}):
+        solves = LinearSolves("auto", None, **kwargs)
+        solves(good, np.ones(good.shape[0]))
+        assert solves._factor.info["precision"] == "double"

@@ -83,7 +83,7 @@ def choose_backend(n_dofs: int, symmetric: bool, requested: str = "auto",
 def factorize(A: sp.spmatrix, *, backend: str = "auto", symmetric: bool = True,
               near_null: np.ndarray | None = None, rtol: float = 1e-10,
               indefinite: bool = False, saddle: tuple | None = None,
-              reuse: LinearSolver | None = None, order: int = 1) -> LinearSolver:
+              reuse: LinearSolver | None = None, order: int = 1, single: bool = False) -> LinearSolver:
     """Factorize (superlu, pardiso) or build the AMG hierarchy (pyamg) of the square matrix
     ``A``. ``near_null`` (e.g. :func:`rigid_body_modes`) and ``rtol`` (relative residual)
     serve pyamg only; ``indefinite``: a saddle-point matrix (:func:`choose_backend`).
@@ -93,7 +93,9 @@ def factorize(A: sp.spmatrix, *, backend: str = "auto", symmetric: bool = True,
     bodies' dofs by a Krylov method preconditioned by the reduced matrix, which gets the
     backend the bodies' dofs alone would get (:func:`choose_backend`).
     ``reuse``: the solver of the system's previous matrix, no longer needed (its PARDISO
-    analysis may serve this one: :func:`cgfem.solve.linear.build`). Raises
+    analysis may serve this one: :func:`cgfem.solve.linear.build`). ``single``: PARDISO's
+    factors (a reduced saddle point's preconditioner's too) in single precision, refined in
+    double (:func:`cgfem.solve.linear.build`). Raises
     :class:`LinearSolverError` on a singular or non-finite matrix, ``ValueError`` on a bad
     backend name or shape."""
     if not sp.issparse(A) or A.ndim != 2 or A.shape[0] != A.shape[1]:
@@ -106,10 +108,11 @@ def factorize(A: sp.spmatrix, *, backend: str = "auto", symmetric: bool = True,
         # factor entries with or without contact, 36M reduced), which no ordering removed
         n_u = int(saddle[0])
         return reduced_saddle(sp.csr_matrix(A, dtype=np.float64), n_u, saddle[1], symmetric, near_null,
-                              max(rtol, 1e-10), preconditioner=choose_backend(n_u, symmetric), reuse=reuse)
+                              max(rtol, 1e-10), preconditioner=choose_backend(n_u, symmetric), reuse=reuse,
+                              single=single)
     if indefinite and symmetric and A.shape[0] > SADDLE_MAX_DOFS:
         raise LinearSolverError(f"{name}: a symmetric saddle-point system of {A.shape[0]} unknowns "
                                 f"(above {SADDLE_MAX_DOFS}) would not fit in memory factorized, and "
                                 "pyamg cannot solve it")
     return linear.build(A, name, symmetric=symmetric, near_null=near_null, rtol=rtol, indefinite=indefinite,
-                        reuse=reuse)
+                        reuse=reuse, single=single)

@@ -10,6 +10,9 @@
   numerical reproducibility mode (``iparm(34)``, the number of MKL threads) with MKL's
   dynamic thread adjustment off: a factorization gives the same bits whatever the machine's
   load, where the default mode's parallel factorization does not (:func:`mkl_threads`).
+  ``single``: factors in single precision (:mod:`cgfem.solve.pardiso`), refined in double
+  precision to the same residual as the double factors; a matrix whose refinement falls
+  short of it is factorized again in double precision (``info["precision"]``).
 - ``pyamg``: smoothed aggregation on 3x3 nodal blocks with the near-null space (rigid-body
   modes) as preconditioner of CG (symmetric) or GMRES(50), after the symmetric diagonal
   scaling ``D^-1/2 A D^-1/2`` (penalty rows, tiny cut cells); converged when the true
@@ -256,7 +259,7 @@ class _Pardiso(_DirectSolver):
     backend = "pardiso"
 
     def __init__(self, A: sp.csr_matrix, symmetric: bool, indefinite: bool = False,
-                 reuse: LinearSolver | None = None) -> None:
+                 reuse: LinearSolver | None = None, single: bool = False) -> None:
         super().__init__(A.shape[0])
         if np.any(np.diff(A.indptr) == 0):
             raise LinearSolverError("pardiso: the matrix has empty rows (singular matrix)")
@@ -273,8 +276,8 @@ class _Pardiso(_DirectSolver):
                 mtype, M = -2, U
         M.sort_indices()
         self._matvec = A.dot  # the check uses all of A, not just its upper half
-        threads = mkl_threads() or 1
-        pattern = reuse._take(mtype, self.n) if isinstance(reuse, _Pardiso) else None
+        self._threads = mkl_threads() or 1
+        pattern = reuse._take(mtype, self.n, single) if isinstance(reuse, _Pardiso) else None
         try:
             data = None if pattern is None else pattern.within(M.indptr, M.indices, M.data)
             analysed = data is None
@@ -284,20 +287,48 @@ class _Pardiso(_DirectSolver):
                     indptr, indices = union_pattern(pattern.indptr, pattern.indices, M.indptr, M.indices)
                     del pattern           # its memory first
                     data = values_on(indptr, indices, M.indptr, M.indices, M.data)
-                pattern = PardisoPattern(_mkl_library(), mtype, indptr, indices, data, threads)
+                pattern = PardisoPattern(_mkl_library(), mtype, indptr, indices, data, self._threads, single)
             pattern.factorize(data)
         except PardisoError as exc:
             raise LinearSolverError(f"pardiso: factorization failed: {exc}") from exc
         self._pattern: PardisoPattern | None = pattern
+        #: the double values on the pattern, for a factorization in double precision if the
+        #: single one's refinement falls short (None: factorized in double already)
+        self._values = np.asarray(data, dtype=np.float64) if single else None
         self.info.update(mtype=mtype, perturbed_pivots=pattern.perturbed_pivots, factor_nnz=pattern.factor_nnz,
-                         threads=threads, analysed=analysed)
+                         threads=self._threads, analysed=analysed, precision="single" if single else "double")
 
-    def _take(self, mtype: int, n: int) -> PardisoPattern | None:
+    def _solve(self, b: np.ndarray, norm_b: float, rtol: float | None) -> tuple[np.ndarray, int, float]:
+        try:
+            return super()._solve(b, norm_b, rtol)
+        except LinearSolverError:
+            if self._values is None or self._pattern is None:
+                raise
+        self._factorize_double()
+        return super()._solve(b, norm_b, rtol)
+
+    def _factorize_double(self) -> None:
+        """The matrix factorized again, in double precision, on its pattern (analysed anew:
+        the analysis depends on the precision)."""
+        old, values = self._pattern, self._values
+        self._pattern, self._values = None, None
+        indptr, indices = old.indptr, old.indices
+        del old                           # its memory first
+        try:
+            pattern = PardisoPattern(_mkl_library(), self.info["mtype"], indptr, indices, values, self._threads)
+            pattern.factorize(values)
+        except PardisoError as exc:
+            raise LinearSolverError(f"pardiso: factorization failed: {exc}") from exc
+        self._pattern = pattern
+        self.info.update(precision="double after single", perturbed_pivots=pattern.perturbed_pivots,
+                         factor_nnz=pattern.factor_nnz, analysed=True)
+
+    def _take(self, mtype: int, n: int, single: bool = False) -> PardisoPattern | None:
         """This solver's analysed pattern, for a new matrix of type ``mtype`` and size ``n``
-        (None if it is of another type or size, or was taken): this solver cannot solve
-        afterwards."""
+        to be factorized in ``single`` precision or not (None if it is of another type, size
+        or precision, or was taken): this solver cannot solve afterwards."""
         pattern = self._pattern
-        if pattern is None or pattern.mtype != mtype or pattern.n != n:
+        if pattern is None or pattern.mtype != mtype or pattern.n != n or pattern.single != single:
             return None
         self._pattern = None
         return pattern
@@ -366,15 +397,17 @@ class _AMG(LinearSolver):
 
 
 def build(A: sp.spmatrix, name: str, *, symmetric: bool = True, near_null: np.ndarray | None = None,
-          rtol: float = 1e-10, indefinite: bool = False, reuse: LinearSolver | None = None) -> LinearSolver:
+          rtol: float = 1e-10, indefinite: bool = False, reuse: LinearSolver | None = None,
+          single: bool = False) -> LinearSolver:
     """The backend ``name`` (one of :data:`BACKENDS`) set up on its own copy of the square
     matrix ``A`` (n, n): factorized (superlu, pardiso) or coarsened (pyamg, which uses
     ``near_null`` (n, k) and the relative residual ``rtol``). ``indefinite``: a saddle point
     (pardiso then factorizes it as non-symmetric). Which backend a system gets is decided in
     :mod:`cgfem.solve.backends`. ``reuse``: a pardiso solver of an earlier matrix of the
     same system, no longer needed: its analysis serves if this matrix's entries lie within its
-    pattern (:mod:`cgfem.solve.pardiso`), and it cannot solve afterwards. Raises
-    :class:`LinearSolverError` on a singular or non-finite matrix."""
+    pattern (:mod:`cgfem.solve.pardiso`), and it cannot solve afterwards. ``single``: pardiso's
+    factors in single precision, refined in double (the module docstring; the other backends
+    ignore it). Raises :class:`LinearSolverError` on a singular or non-finite matrix."""
     t0 = time.perf_counter()
     A = sp.csr_matrix(A, dtype=np.float64, copy=True)  # our own copy, sorted and summed
     A.sum_duplicates()
@@ -384,7 +417,7 @@ def build(A: sp.spmatrix, name: str, *, symmetric: bool = True, near_null: np.nd
     if name == "superlu":
         solver = _SuperLU(A, symmetric)
     elif name == "pardiso":
-        solver = _Pardiso(A, symmetric, indefinite, reuse)
+        solver = _Pardiso(A, symmetric, indefinite, reuse, single)
     elif name == "pyamg":
         solver = _AMG(A, symmetric, near_null, rtol)
     else:

@@ -12,6 +12,12 @@ matrices had 16 different patterns but their union grew three times, by 1 % of t
 The analysis is about half of a factorization there (0.48 s of 1.03 s at 16 878 unknowns,
 one thread; docs/performance.md, "Analysed once").
 
+A pattern may factorize in single precision (``iparm(28)``, its values and right-hand sides
+stored as float32, PARDISO's own iterative refinement off: ``iparm(8)``). Its factors take
+half the memory and about a third less time on the examples' matrices (docs/performance.md,
+"Factors in single precision"); a solve with them has a relative residual of about ``1e-7``,
+which the caller refines in double precision (:class:`cgfem.solve.linear.LinearSolver`).
+
 The interface is MKL's documented ``pardiso`` call (LP64, zero-based indices ``iparm(35)``),
 in its conditional numerical reproducibility mode with the given threads (``iparm(34)``): the
 same matrices in the same order give the same bits.
@@ -104,11 +110,15 @@ class PardisoPattern:
 
     ``data`` (nnz,): the values on the pattern the analysis sees (type 11's matching and
     scaling read them); ``library``: MKL's runtime (``ctypes.CDLL``); ``threads``: the
-    reproducibility mode's. Raises :class:`PardisoError` if the analysis fails."""
+    reproducibility mode's; ``single``: factors in single precision (module docstring).
+    Raises :class:`PardisoError` if the analysis fails."""
 
     def __init__(self, library: ctypes.CDLL, mtype: int, indptr: np.ndarray, indices: np.ndarray,
-                 data: np.ndarray, threads: int) -> None:
+                 data: np.ndarray, threads: int, single: bool = False) -> None:
         self.mtype, self.n = int(mtype), int(indptr.size - 1)
+        self.single = bool(single)
+        #: the floating-point type of the values, right-hand sides and solutions PARDISO sees
+        self._dtype = np.float32 if self.single else np.float64
         self.indptr = np.ascontiguousarray(indptr, dtype=np.int32)
         self.indices = np.ascontiguousarray(indices, dtype=np.int32)
         self._call = library.pardiso
@@ -119,11 +129,14 @@ class PardisoPattern:
                             ctypes.byref(_INT(self.mtype)), self.iparm.ctypes.data_as(_INT_P))
         self.iparm[33] = threads      # iparm(34): reproducible with this many threads
         self.iparm[34] = 1            # iparm(35): zero-based indices
+        if self.single:
+            self.iparm[27] = 1        # iparm(28): single precision
+            self.iparm[7] = 0         # iparm(8): no refinement in single precision
         self._data: np.ndarray | None = None     # the values last factorized
         weakref.finalize(self, _release, self._call, self.pt, self.iparm, self.mtype, self.n)
         #: whether :meth:`factorize` has run (:meth:`solve` needs it)
         self.factorized = False
-        self._phase(11, np.ascontiguousarray(data, dtype=np.float64))
+        self._phase(11, np.ascontiguousarray(data, dtype=self._dtype))
 
     @property
     def nnz(self) -> int:
@@ -136,18 +149,24 @@ class PardisoPattern:
 
     def factorize(self, data: np.ndarray) -> None:
         """Numerical factorization (phase 22) of the values ``data`` (nnz,) on the pattern."""
-        self._data = np.ascontiguousarray(data, dtype=np.float64)
+        self._data = np.ascontiguousarray(data, dtype=self._dtype)
         self._phase(22, self._data)
         self.factorized = True
 
     def solve(self, b: np.ndarray) -> np.ndarray:
-        """``x`` (n,) with ``A x = b`` for the last factorized values (phase 33)."""
+        """``x`` (n,) float64 with ``A x = b`` for the last factorized values (phase 33). In
+        single precision ``b`` is scaled to a largest entry of 1 before it is rounded, so that
+        no entry leaves float32's range."""
         if not self.factorized:
             raise PardisoError("solve before a factorization")
-        b = np.ascontiguousarray(b, dtype=np.float64)
+        scale = 1.0
+        if self.single:
+            scale = float(np.abs(b).max(initial=0.0)) or 1.0
+            b = b / scale
+        b = np.ascontiguousarray(b, dtype=self._dtype)
         x = np.zeros_like(b)
         self._phase(33, self._data, b, x)
-        return x
+        return x.astype(np.float64) * scale if self.single else x
 
     @property
     def perturbed_pivots(self) -> int:

@@ -24,8 +24,13 @@
   next ``policy.krylov_stall_direct`` matrices too. The tolerance is inexact Newton's
   (:func:`cgfem.solve.newton.forcing_rtol`), never tighter than ``policy.krylov_rtol``.
 
+PARDISO's factors are in single precision, refined in double, where ``policy.factor_precision``
+asks for it and no body is held by contact alone; once a matrix of the system needs its
+factorization again in double precision, every later one gets double factors at once.
+
 Every choice is logged: the path and backend once, and per Krylov solve its iterations and
-whether the preconditioner was kept, refreshed, or the solve fell back.
+whether the preconditioner was kept, refreshed, or the solve fell back; factors in double
+precision after single ones fell short.
 """
 
 from __future__ import annotations
@@ -102,6 +107,8 @@ class LinearSolves:
         #: matrices still to factorize directly after a stall (``policy.krylov_stall_direct``)
         self._direct_left = 0
         self._n = None
+        #: PARDISO's factors in single precision (refined in double) until one falls short
+        self.single = policy.factor_precision == "single" and not floating
         #: per solve: (path, iterations, what happened) for the benchmarks and the tests
         self.history: list[tuple[str, int, str]] = []
 
@@ -142,14 +149,25 @@ class LinearSolves:
             previous, self._factor = self._factor, None
             self._factor = factorize(K, backend=self.backend, symmetric=self.symmetric,
                                      near_null=self.near_null, indefinite=self.indefinite, saddle=self.saddle,
-                                     reuse=previous, order=self.order)
+                                     reuse=previous, order=self.order, single=self.single)
             self._key = weakref.ref(K)
             if not self._logged:
                 self._logged = True
-                self.log(f"linear: direct, {self._factor.backend}, {n} unknowns")
+                precision = self._factor.info.get("precision")
+                factors = f" ({precision} precision factors)" if precision else ""
+                self.log(f"linear: direct, {self._factor.backend}{factors}, {n} unknowns")
         x = self._factor.solve(b, rtol)
+        self._check_precision()
         self.history.append((DIRECT, int(self._factor.info["iterations"][-1]), self._factor.backend))
         return x
+
+    def _check_precision(self) -> None:
+        """Double factors from now on if the last factorization had to be repeated in double
+        precision (logged once)."""
+        if self.single and self._factor.info.get("precision") == "double after single":
+            self.single = False
+            self.log("linear: single-precision factors fell short of the residual check; "
+                     "factorized again in double precision, and so from now on")
 
     def _is_last(self, K: sp.csr_matrix | None) -> bool:
         """Whether ``K`` is the matrix last set up (None: the one a frozen solve keeps)."""
@@ -160,14 +178,18 @@ class LinearSolves:
         """``b`` (n,) solved with the last matrix's factorization on the direct path, without a
         new set-up or the residual check (a reduced saddle point to :data:`AGAIN_RTOL`): the
         floating bodies' cut rotations (:meth:`~cgfem.solve.floating.FloatingBodies.limit`),
-        whose right-hand sides are rigid rotations of a body the matrix barely holds."""
+        whose right-hand sides are rigid rotations of a body the matrix barely holds. Factors
+        in single precision are refined and checked as by a solve (their own solution is good
+        to about ``1e-7`` only)."""
         factor = self._factor
         if factor is None or not self.factorizes:
             raise LinearSolverError("no factorization to solve with again")
         if isinstance(factor, ReducedSaddleSolver):
             return factor.iterate(b, AGAIN_RTOL, self.policy.krylov_max_iterations)[0]
         unchecked = getattr(factor, "solve_unchecked", None)
-        return unchecked(b) if unchecked is not None else factor.solve(b)
+        if unchecked is None or factor.info.get("precision") == "single":
+            return factor.solve(b)
+        return unchecked(b)
 
     def _krylov(self, K: sp.csr_matrix | None, b: np.ndarray, rtol: float | None) -> np.ndarray:
         """The Krylov path (module docstring)."""
@@ -238,8 +260,8 @@ class LinearSolves:
         if self.saddle is not None:
             # the saddle point's reduced matrix factorized as its preconditioner
             return reduced_saddle(K, self.saddle[0], self.saddle[1], self.symmetric, self.near_null,
-                                  preconditioner=direct, reuse=previous)
-        return factorize(K, backend=direct, symmetric=self.symmetric, reuse=previous)
+                                  preconditioner=direct, reuse=previous, single=self.single)
+        return factorize(K, backend=direct, symmetric=self.symmetric, reuse=previous, single=self.single)
 
     def kept_limit(self, target: float) -> int:
         """The iterations a solve to the relative residual ``target`` may take with a kept
