@@ -13,8 +13,11 @@ probe time at which this work would take that wall time. Run jobs scale with the
 machines of a kind (docs/performance.md, "Full pipeline runs"), so the probe units compare
 runs made on different machines.
 
+With ``--record-runs FILE`` it also writes each run's seconds (JSON, by run folder), the
+table the workflow orders its runs by (``config/run_seconds.json``: the longest first).
+
     python3 -m benchmarks.bench_pipeline [--root DIR] [--log FILE] [--cores 2] [--probe]
-        [--target 15] [--json out.json]
+        [--target 15] [--json out.json] [--record-runs config/run_seconds.json]
 """
 
 from __future__ import annotations
@@ -167,6 +170,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--probe", action="store_true", help="time the probe run on this machine")
     parser.add_argument("--target", type=float, default=15.0, help="the wall time to project to (min)")
     parser.add_argument("--json", type=Path)
+    parser.add_argument("--record-runs", type=Path, metavar="FILE",
+                        help="write each run's seconds (JSON), the workflow's run order")
     args = parser.parse_args(argv)
     log = args.log or max((args.root / ".snakemake" / "log").glob("*.snakemake.log"), default=None)
     try:
@@ -191,6 +196,9 @@ def main(argv: list[str] | None = None) -> int:
               f"this work fits where the probe takes at most {out['probe_at_target_s']:.2f} s")
     if args.json:
         write_json_atomic(args.json, out)
+    if args.record_runs:
+        times = run_times(args.root / "results" / "benchmarks" / "runs")
+        write_json_atomic(args.record_runs, {name: round(s, 1) for name, s in sorted(times.items())})
     return 0
 
 

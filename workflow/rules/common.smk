@@ -1,5 +1,6 @@
 # Configuration check and the helpers every rule file uses (no rules here).
 import functools
+import json
 import os
 from pathlib import Path
 
@@ -82,6 +83,23 @@ def case_file(wildcards):
 
 def run_folder(wildcards):
     return RUN.format(**wildcards)
+
+
+#: each run's seconds in a full run of the default configuration, one thread, by its folder
+#: under results/runs (``python3 -m benchmarks.bench_pipeline --record-runs``)
+RUN_SECONDS = json.loads(Path("config/run_seconds.json").read_text())
+#: the priority of the jobs that go before every run (the kernels' compilation)
+FIRST = 10**6
+
+
+def run_priority(wildcards):
+    """A run job's priority: its recorded seconds, so that the cores take the longest runs
+    first and finish together (longest processing time first); a run not recorded (a level
+    or a case file the default configuration does not run, as the extended configuration's
+    level-3 runs) before every recorded one."""
+    order = wildcards.get("order")
+    name = f"{wildcards.case}/L{wildcards.level}_{wildcards.surface}" + (f"_o{order}" if order else "")
+    return float(RUN_SECONDS.get(name, 1.0 + max(RUN_SECONDS.values(), default=0.0)))
 
 
 def summaries(case, surfaces=None, levels=None):

@@ -10,7 +10,7 @@ rule compile_kernels:
         "logs/kernels/share_{share}_of_{shares}.log",
     threads: 1
     # ahead of every other job: the runs then find their kernels compiled
-    priority: 100
+    priority: FIRST
     shell:
         "NUMBA_NUM_THREADS={threads} OMP_NUM_THREADS={threads} MKL_NUM_THREADS={threads} "
         "cgfem warmup --share {wildcards.share}/{wildcards.shares} > {output}.tmp 2> {log} "
@@ -39,6 +39,8 @@ rule run_case:
     threads: 1
     resources:
         mem_mb=run_memory_mb,
+    # the longest first
+    priority: run_priority
     shell:
         "NUMBA_NUM_THREADS={threads} OMP_NUM_THREADS={threads} MKL_NUM_THREADS={threads} "
         "cgfem run {input.case} --level {wildcards.level} --surface {wildcards.surface} "
@@ -66,8 +68,8 @@ rule run_case_order:
     threads: 1
     resources:
         mem_mb=run_memory_mb,
-    # started first: the longest jobs (in the smoke run it finished last, 13 s before the end)
-    priority: 10
+    # the longest first
+    priority: run_priority
     shell:
         "NUMBA_NUM_THREADS={threads} OMP_NUM_THREADS={threads} MKL_NUM_THREADS={threads} "
         "cgfem run {input.case} --level {wildcards.level} --surface {wildcards.surface} "
