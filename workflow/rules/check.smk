@@ -8,6 +8,9 @@ rule check_case:
         ENV
     log:
         "logs/check/{case}.log",
+    # right after the kernels' compilation: every run of the case waits for it (the runs'
+    # priorities do not pass on to the jobs they need)
+    priority: FIRST - 1
     shell:
         "NUMBA_NUM_THREADS={threads} OMP_NUM_THREADS={threads} MKL_NUM_THREADS={threads} "
         "cgfem check {input} --json > {output}.tmp 2> {log} && mv {output}.tmp {output}"

@@ -88,7 +88,8 @@ def run_folder(wildcards):
 #: each run's seconds in a full run of the default configuration, one thread, by its folder
 #: under results/runs (``python3 -m benchmarks.bench_pipeline --record-runs``)
 RUN_SECONDS = json.loads(Path("config/run_seconds.json").read_text())
-#: the priority of the jobs that go before every run (the kernels' compilation)
+#: the priority of the jobs that go before every run (the kernels' compilation; the cases'
+#: checks, which the runs need, right after)
 FIRST = 10**6
 
 

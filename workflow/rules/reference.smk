@@ -6,6 +6,8 @@ rule planar_reference:
         ENV
     log:
         "logs/reference/planar.log",
+    # early, with the cases' checks: every planar error table waits for it
+    priority: FIRST - 1
     shell:
         "NUMBA_NUM_THREADS={threads} OMP_NUM_THREADS={threads} MKL_NUM_THREADS={threads} "
         "python3 -m cgfem.reference.planar --out {output} > {log} 2>&1"
