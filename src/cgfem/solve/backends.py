@@ -94,8 +94,10 @@ def factorize(A: sp.spmatrix, *, backend: str = "auto", symmetric: bool = True,
     backend the bodies' dofs alone would get (:func:`choose_backend`).
     ``reuse``: the solver of the system's previous matrix, no longer needed (its PARDISO
     analysis may serve this one: :func:`cgfem.solve.linear.build`). ``single``: PARDISO's
-    factors (a reduced saddle point's preconditioner's too) in single precision, refined in
-    double (:func:`cgfem.solve.linear.build`). Raises
+    factors in single precision, refined in double (:func:`cgfem.solve.linear.build`); not a
+    reduced saddle point's preconditioner, with which the Krylov solve would take more
+    iterations (25 against 40 in ``tests/unit/test_saddle.py``), each with the fit's own
+    solves. Raises
     :class:`LinearSolverError` on a singular or non-finite matrix, ``ValueError`` on a bad
     backend name or shape."""
     if not sp.issparse(A) or A.ndim != 2 or A.shape[0] != A.shape[1]:
@@ -108,8 +110,7 @@ def factorize(A: sp.spmatrix, *, backend: str = "auto", symmetric: bool = True,
         # factor entries with or without contact, 36M reduced), which no ordering removed
         n_u = int(saddle[0])
         return reduced_saddle(sp.csr_matrix(A, dtype=np.float64), n_u, saddle[1], symmetric, near_null,
-                              max(rtol, 1e-10), preconditioner=choose_backend(n_u, symmetric), reuse=reuse,
-                              single=single)
+                              max(rtol, 1e-10), preconditioner=choose_backend(n_u, symmetric), reuse=reuse)
     if indefinite and symmetric and A.shape[0] > SADDLE_MAX_DOFS:
         raise LinearSolverError(f"{name}: a symmetric saddle-point system of {A.shape[0]} unknowns "
                                 f"(above {SADDLE_MAX_DOFS}) would not fit in memory factorized, and "

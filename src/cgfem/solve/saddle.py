@@ -116,8 +116,7 @@ class ReducedSaddleSolver(LinearSolver):
 
     def __init__(self, A: sp.csr_matrix, n_u: int, constraints: list[FitConstraint], symmetric: bool,
                  near_null: np.ndarray | None, rtol: float = 1e-10, max_iterations: int = 1000,
-                 preconditioner: str = "pyamg", drop: float = DROP, reuse: LinearSolver | None = None,
-                 single: bool = False) -> None:
+                 preconditioner: str = "pyamg", drop: float = DROP, reuse: LinearSolver | None = None) -> None:
         super().__init__(A.shape[0])
         if preconditioner != "pyamg":
             self.backend = f"saddle-{preconditioner}"
@@ -146,7 +145,7 @@ class ReducedSaddleSolver(LinearSolver):
                 P = symmetric_part(P)
             # the preconditioner of the system's previous matrix, if given, lends its analysis
             factor = build(P, preconditioner, symmetric=symmetric,
-                           reuse=reuse._factor if isinstance(reuse, ReducedSaddleSolver) else None, single=single)
+                           reuse=reuse._factor if isinstance(reuse, ReducedSaddleSolver) else None)
             self._factor = factor
             self.info["factor_nnz"] = int(factor.info.get("factor_nnz", 0))
             self._precondition = factor.solve_unchecked
@@ -277,14 +276,12 @@ class ReducedSaddleSolver(LinearSolver):
 
 def reduced_saddle(A: sp.csr_matrix, n_u: int, constraints: list[FitConstraint], symmetric: bool,
                    near_null: np.ndarray | None = None, rtol: float = 1e-10,
-                   preconditioner: str = "pyamg", reuse: LinearSolver | None = None,
-                   single: bool = False) -> ReducedSaddleSolver:
+                   preconditioner: str = "pyamg", reuse: LinearSolver | None = None) -> ReducedSaddleSolver:
     """Set up :class:`ReducedSaddleSolver` for ``A`` (timed like the other backends);
     ``reuse``: the solver of the system's previous matrix, whose factorized preconditioner
-    then lends its PARDISO analysis (:func:`cgfem.solve.linear.build`); ``single``: that
-    factorization in single precision (:func:`cgfem.solve.linear.build`)."""
+    then lends its PARDISO analysis (:func:`cgfem.solve.linear.build`)."""
     t0 = time.perf_counter()
     solver = ReducedSaddleSolver(A, n_u, constraints, symmetric, near_null, rtol,
-                                 preconditioner=preconditioner, reuse=reuse, single=single)
+                                 preconditioner=preconditioner, reuse=reuse)
     solver.info.update(backend=solver.backend, symmetric=symmetric, setup_s=time.perf_counter() - t0)
     return solver

@@ -260,7 +260,7 @@ class LinearSolves:
         if self.saddle is not None:
             # the saddle point's reduced matrix factorized as its preconditioner
             return reduced_saddle(K, self.saddle[0], self.saddle[1], self.symmetric, self.near_null,
-                                  preconditioner=direct, reuse=previous, single=self.single)
+                                  preconditioner=direct, reuse=previous)
         return factorize(K, backend=direct, symmetric=self.symmetric, reuse=previous, single=self.single)
 
     def kept_limit(self, target: float) -> int:
