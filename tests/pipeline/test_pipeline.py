@@ -110,8 +110,31 @@ def test_the_kernels_compile_in_one_share_per_core_first(workdir, cores):
     assert planned_jobs(text)["compile_kernels"] == shares
     planned = set(re.findall(r"results/cache/kernels/share_(\d+)_of_(\d+)\.json", text))
     assert planned == {(str(k), str(shares)) for k in range(1, shares + 1)}
-    priorities = {int(p) for p in re.findall(r"priority: (\d+)", text)}
-    assert re.search(r"rule compile_kernels:.*?priority: 100", text, re.S) and max(priorities) == 100
+    priorities = {float(p) for p in re.findall(r"priority: ([\d.]+)", text)}
+    first = re.search(r"rule compile_kernels:.*?priority: ([\d.]+)", text, re.S)
+    assert first and float(first[1]) == max(priorities)
+
+
+def test_runs_start_longest_first(workdir):
+    """A run job's priority is its recorded seconds (config/run_seconds.json); a run not
+    recorded (the extended configuration's level 3) comes before every recorded one; the
+    cases' checks and the planar reference, which runs wait for, before every run."""
+    import json
+    recorded = json.loads((REPO / "config" / "run_seconds.json").read_text())
+    text = dry_run(workdir, "--configfile", "config/extended.yaml")
+    jobs = re.findall(r"rule (\w+):\n(?:    .*\n)*?    wildcards: (.*)\n    priority: ([\d.]+)", text)
+    runs = {}
+    for rule, wildcards, priority in jobs:
+        if rule.startswith("run_case"):
+            w = dict(item.split("=") for item in wildcards.split(", "))
+            name = f"{w['case']}/L{w['level']}_{w['surface']}" + (f"_o{w['order']}" if "order" in w else "")
+            runs[name] = float(priority)
+    assert len(runs) == 45 + 9                       # the default runs and the extended ones
+    for name, priority in runs.items():
+        assert priority == (recorded[name] if name in recorded else 1.0 + max(recorded.values())), name
+    assert any(name not in recorded for name in runs)
+    checks = [float(p) for p in re.findall(r"rule (?:check_case|planar_reference):\n(?:    .*\n)*?    priority: ([\d.]+)", text)]
+    assert len(checks) == 5 and min(checks) > max(runs.values())
 
 
 def planned_runs(root: Path, *args: str, target: str | None = None) -> set[str]:
@@ -194,7 +217,7 @@ def test_runs_reserve_their_estimated_memory(workdir):
     done = snakemake(workdir, "-n", "--forceall", "--configfile", "config/extended.yaml",
                      "--resources", f"mem_mb={budget}")
     assert done.returncode == 0, done.stderr + done.stdout
-    jobs = re.findall(r"rule (run_case\w*):\n(?:    .*\n)*?    wildcards: (.*)\n    resources: (.*)",
+    jobs = re.findall(r"rule (run_case\w*):\n(?:    .*\n)*?    wildcards: (.*)\n(?:    priority: .*\n)?    resources: (.*)",
                       done.stdout + done.stderr)
     config = yaml.safe_load((REPO / "config" / "extended.yaml").read_text())
     assert len([j for j in jobs if j[0] == "run_case"]) == expected_runs(config)
