@@ -88,6 +88,8 @@ def run_folder(wildcards):
 #: each run's seconds in a full run of the default configuration, one thread, by its folder
 #: under results/runs (``python3 -m benchmarks.bench_pipeline --record-runs``)
 RUN_SECONDS = json.loads(Path("config/run_seconds.json").read_text())
+#: the priority of a run not recorded: before every recorded one
+UNRECORDED = 1.0 + max(RUN_SECONDS.values(), default=0.0)
 #: the priority of the jobs that go before every run (the kernels' compilation; the cases'
 #: checks, which the runs need, right after)
 FIRST = 10**6
@@ -100,7 +102,7 @@ def run_priority(wildcards):
     level-3 runs) before every recorded one."""
     order = wildcards.get("order")
     name = f"{wildcards.case}/L{wildcards.level}_{wildcards.surface}" + (f"_o{order}" if order else "")
-    return float(RUN_SECONDS.get(name, 1.0 + max(RUN_SECONDS.values(), default=0.0)))
+    return float(RUN_SECONDS.get(name, UNRECORDED))
 
 
 def summaries(case, surfaces=None, levels=None):
