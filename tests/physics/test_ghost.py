@@ -152,6 +152,30 @@ def test_the_pattern_is_the_elements_and_the_ghost_couplings(order):
     assert have == expected
 
 
+@pytest.mark.parametrize("order", [1, 2])
+def test_the_penalty_matrix_is_the_sum_of_its_face_matrices(order):
+    """The body's ghost-penalty matrix is the sum over the penalized faces of the face matrix
+    on each displacement component (summed here entry by entry, as a dense matrix; the nodes
+    on the face are in both elements' lists, and each list's entry counts), and its
+    positions in the pattern carry it into the stiffness."""
+    model, _ = _stiffness(1e-1, 0.05, order)
+    space, G = model.space, model.ghost
+    pairs, axes = face_pairs(space)
+    lam, mu = model.elasticity.lam, model.elasticity.mu
+    scale = 0.05 * (lam + 2.0 * mu) * space.h
+    expected = np.zeros((space.n_dofs, space.n_dofs))
+    blocks = [face_matrix(a, space.h, space.element) * scale for a in range(3)]
+    for (lower, upper), axis in zip(pairs, axes):
+        nodes = np.concatenate([space.connectivity[lower], space.connectivity[upper]])
+        for c in range(3):
+            np.add.at(expected, np.ix_(3 * nodes + c, 3 * nodes + c), blocks[axis])
+    assert len(pairs) > 10
+    assert np.abs(G.toarray() - expected).max() <= 1e-13 * np.abs(expected).max()
+    data = model.pattern.zeros()
+    data[model.ghost_positions] = G.data
+    assert np.array_equal(model.pattern.matrix(data).toarray(), G.toarray())
+
+
 def _torus_stiffness(offset, order: int, h0: float):
     """A rotated torus clamped weakly on its whole surface, elements of ``order``: the
     stabilized stiffness with its Dirichlet penalty, and the smallest material fraction of

@@ -102,3 +102,31 @@ def dof_pattern(node_ptr, nbr, connectivity, scatter):
                     for k in range(3):
                         scatter[e, nd * (3 * la + i) + 3 * lb + k] = base + i * 3 * deg + k
     return indptr, indices
+
+
+@njit(cache=True)
+def add_node_blocks(nodes, blocks, which, indptr, indices, out):
+    """``out`` (the data of a dof pattern) plus, for every row ``f`` of ``nodes`` (m, q) and
+    every pair ``(i, j)`` of its entries, ``blocks[which[f], i, j]`` at the pattern's entries
+    ``(3 nodes[f, i] + c, 3 nodes[f, j] + c)``, ``c = 0, 1, 2`` (the same scalar coupling on
+    each displacement component). Every such node pair must be in the pattern, whose rows of
+    one node list the same columns, each node's three in a row (:func:`dof_pattern`)."""
+    q = nodes.shape[1]
+    for f in range(nodes.shape[0]):
+        block = blocks[which[f]]
+        for i in range(q):
+            row = 3 * nodes[f, i]
+            first, last = indptr[row], indptr[row + 1]
+            for j in range(q):
+                column = 3 * nodes[f, j]
+                lo, hi = first, last
+                while lo < hi:                   # the column in the node's sorted row
+                    mid = (lo + hi) // 2
+                    if indices[mid] < column:
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                offset = lo - first
+                value = block[i, j]
+                for c in range(3):
+                    out[indptr[row + c] + offset + c] += value

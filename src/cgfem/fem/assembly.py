@@ -46,20 +46,6 @@ class Pattern:
         """The CSR matrix with these values (shares ``data``)."""
         return sp.csr_matrix((data, self.indices, self.indptr), shape=(self.n_dofs, self.n_dofs))
 
-    def positions(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-        """Data positions of dof pairs that are in the pattern."""
-        rows = np.asarray(rows, np.int64)
-        cols = np.asarray(cols, np.int64)
-        start, stop = self.indptr[rows], self.indptr[rows + 1]
-        # columns of a row are sorted: binary search inside each row's slice
-        keys = rows * self.n_dofs + cols
-        flat = np.repeat(np.arange(self.n_dofs, dtype=np.int64), np.diff(self.indptr)) * self.n_dofs \
-            + self.indices
-        pos = np.searchsorted(flat, keys)
-        if np.any(pos >= stop) or np.any(pos < start) or np.any(flat[np.minimum(pos, flat.size - 1)] != keys):
-            raise ValueError("dof pair outside the sparsity pattern")
-        return pos
-
 
 def colours(space: Space) -> tuple[np.ndarray, ...]:
     """Split the active elements in 8 sets by the parity of their grid indices: two

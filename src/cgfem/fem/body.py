@@ -23,7 +23,7 @@ from cgfem.fem.boundary import (BoundaryPoints, WeakDirichlet, body_force_load, 
                                 traction_load)
 from cgfem.fem.elasticity import Elasticity
 from cgfem.fem.element import HEX8, Hexahedron
-from cgfem.fem.ghost import ghost_penalty
+from cgfem.fem.ghost import GhostFaces, ghost_penalty
 from cgfem.fem.space import ElementPoints, Space
 
 
@@ -40,7 +40,7 @@ class BodyModel:
     dirichlet: list[WeakDirichlet]
     load: np.ndarray                 # (n_dofs,) dead loads at load factor 1
     recovery: spr.Recovery
-    _ghost_pos: np.ndarray | None = field(default=None, repr=False)
+    ghost_positions: np.ndarray = field(repr=False)   # where ghost.data lies in the pattern's data
     _boundary: BoundaryPoints | None = field(default=None, repr=False)
     _samples: ElementPoints | None = field(default=None, repr=False)
 
@@ -62,8 +62,9 @@ class BodyModel:
         lam, mu = body.material.lame()          # Lame(lam, mu)
         model = model_id(body.material.model) if finite else LINEAR_ELASTIC
         gamma = element.ghost_penalty if options.ghost_penalty is None else options.ghost_penalty
-        G, extra = ghost_penalty(space, gamma, lam + 2.0 * mu)
-        pattern = build_pattern(space, extra)
+        faces = GhostFaces.of(space)
+        pattern = build_pattern(space, faces.node_pairs(element) if gamma != 0.0 else None)
+        G, ghost_positions = ghost_penalty(space, faces, pattern, gamma, lam + 2.0 * mu)
         volume = space.volume_points(embedding)
         elasticity = Elasticity(space, pattern, volume, model, mu, lam)
         kappa = element.kappa_dirichlet if options.kappa_dirichlet is None else options.kappa_dirichlet
@@ -81,7 +82,7 @@ class BodyModel:
             elif isinstance(bc, TractionBC):
                 load += traction_load(space, points, bc.value)
         return cls(body.name, space, embedding, pattern, elasticity, G, gamma, kappa, dirichlet, load,
-                   spr.build_recovery(space))
+                   spr.build_recovery(space), ghost_positions)
 
     @property
     def n_dofs(self) -> int:
@@ -108,17 +109,10 @@ class BodyModel:
         if self.ghost.nnz:
             r += self.ghost @ u
             if data is not None:
-                data[self._ghost_positions()] += self.ghost.data
+                data[self.ghost_positions] += self.ghost.data
         for term in self.dirichlet:
             term.add(u, t, frozen_stress, r, data)
         return r, (self.pattern.matrix(data) if data is not None else None)
-
-    def _ghost_positions(self) -> np.ndarray:
-        if self._ghost_pos is None:
-            coo = self.ghost.tocoo()
-            self._ghost_pos = self.pattern.positions(coo.row, coo.col)
-            # tocoo keeps the CSR order, so positions line up with ghost.data
-        return self._ghost_pos
 
     # -- recovered stress and outputs ------------------------------------------------------
     def recover(self, u: np.ndarray) -> np.ndarray:

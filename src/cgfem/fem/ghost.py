@@ -24,9 +24,13 @@ element), computed once.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 import scipy.sparse as sp
 
+from cgfem.fem._pattern_kernels import add_node_blocks
+from cgfem.fem.assembly import Pattern
 from cgfem.fem.element import HEX8, Hexahedron
 from cgfem.fem.space import Space
 from cgfem.quadrature_rules import tensor_gauss
@@ -77,38 +81,48 @@ def face_matrix(axis: int, h: float, element: Hexahedron = HEX8) -> np.ndarray:
     return out
 
 
-def ghost_penalty(space: Space, gamma: float, modulus: float) -> tuple[sp.csr_matrix, np.ndarray]:
-    """The ghost-penalty matrix (n_dofs, n_dofs) and the node pairs (m, 2) it couples that no
-    element does (one node of each element of a face, both off the face; for the sparsity
-    pattern, repeats among them)."""
-    pairs, axes = face_pairs(space)
+class GhostFaces(NamedTuple):
+    """The faces :func:`face_pairs` finds, by their elements' nodes: ``nodes`` (m, 2 n), the
+    lower element's ``n`` nodes then the upper one's, and ``axes`` (m,), each face's normal."""
+
+    nodes: np.ndarray
+    axes: np.ndarray
+
+    @classmethod
+    def of(cls, space: Space) -> "GhostFaces":
+        pairs, axes = face_pairs(space)
+        nodes = np.concatenate([space.connectivity[pairs[:, 0]], space.connectivity[pairs[:, 1]]], axis=1)
+        return cls(np.ascontiguousarray(nodes, dtype=np.int64), axes)
+
+    def node_pairs(self, element: Hexahedron) -> np.ndarray:
+        """The node pairs (k, 2) across the faces that no element couples: a node of the lower
+        element off the face with one of the upper element off it (a node on the face is in
+        both elements); with repeats, one direction (the pattern builder adds both)."""
+        m = element.n_nodes
+        lower, upper = [], []
+        for axis in range(3):
+            face = self.nodes[self.axes == axis]
+            below = np.flatnonzero(element.node_ijk[:, axis] < element.order)
+            above = np.flatnonzero(element.node_ijk[:, axis] > 0)
+            a, b = face[:, below], face[:, m + above]
+            lower.append(np.repeat(a, above.size, axis=1).ravel())
+            upper.append(np.tile(b, (1, below.size)).ravel())
+        return np.stack([np.concatenate(lower), np.concatenate(upper)], axis=1).astype(np.int64)
+
+
+def ghost_penalty(space: Space, faces: GhostFaces, pattern: Pattern, gamma: float,
+                  modulus: float) -> tuple[sp.csr_matrix, np.ndarray]:
+    """The ghost-penalty matrix (n_dofs, n_dofs) of ``faces`` with ``gamma`` and the P-wave
+    ``modulus``, and the positions of its entries in the data of ``pattern`` (which must
+    couple the faces' nodes: :meth:`GhostFaces.node_pairs`), in the order of its own data.
+    Entries that sum to exactly zero are left out."""
     n = space.n_dofs
-    if pairs.size == 0 or gamma == 0.0:
-        return sp.csr_matrix((n, n)), np.zeros((0, 2), np.int64)
-    scale = gamma * modulus * space.h
-    nodes = np.concatenate([space.connectivity[pairs[:, 0]], space.connectivity[pairs[:, 1]]], axis=1)
-    mats = np.stack([face_matrix(a, space.h, space.element) for a in range(3)])[axes] * scale
-    rows = np.broadcast_to(3 * nodes[:, :, None], mats.shape).ravel()
-    cols = np.broadcast_to(3 * nodes[:, None, :], mats.shape).ravel()
-    # one COO of the three components (row 3a+i holds component i's entries alone, in the
-    # order of one component's COO: the duplicates are summed as for a matrix per component;
-    # sums that cancel exactly are dropped, as scipy's sum of the three would)
-    values = np.tile(mats.ravel(), 3)
-    G = sp.coo_matrix((values, (np.concatenate([rows + i for i in range(3)]),
-                                np.concatenate([cols + i for i in range(3)]))), shape=(n, n)).tocsr()
-    G.sum_duplicates()
-    G.eliminate_zeros()
-    # the pairs across each face that no element couples: a node of the lower element off the
-    # face with one of the upper element off it (a node on the face is in both elements); the
-    # pattern builder adds both directions and drops repeats
-    element, m = space.element, space.connectivity.shape[1]
-    lower, upper = [], []
-    for axis in range(3):
-        face = nodes[axes == axis]           # the lower element's nodes first, then the upper's
-        below = np.flatnonzero(element.node_ijk[:, axis] < element.order)
-        above = np.flatnonzero(element.node_ijk[:, axis] > 0)
-        a, b = face[:, below], face[:, m + above]
-        lower.append(np.repeat(a, above.size, axis=1).ravel())
-        upper.append(np.tile(b, (1, below.size)).ravel())
-    lower, upper = np.concatenate(lower), np.concatenate(upper)
-    return G, np.stack([lower, upper], axis=1)
+    if faces.axes.size == 0 or gamma == 0.0:
+        return sp.csr_matrix((n, n)), np.zeros(0, np.int64)
+    blocks = np.stack([face_matrix(a, space.h, space.element) for a in range(3)]) * (gamma * modulus * space.h)
+    values = pattern.zeros()
+    add_node_blocks(faces.nodes, blocks, faces.axes.astype(np.int64), pattern.indptr, pattern.indices, values)
+    positions = np.flatnonzero(values)
+    indptr = np.searchsorted(positions, pattern.indptr).astype(pattern.indptr.dtype)
+    G = sp.csr_matrix((values[positions], pattern.indices[positions], indptr), shape=(n, n))
+    return G, positions
