@@ -333,6 +333,43 @@ def test_a_step_that_fails_is_tried_again_with_each_fallback(monkeypatch):
     assert result.status == "failed" and len(calls) == 2 and "fallback" not in result.message
 
 
+def test_a_state_rejected_for_a_turn_goes_to_the_next_fallback_without_cut_backs(monkeypatch):
+    """A state rejected because a floating body turned is not cut back while a fallback is
+    left: the step is tried again at once with the next fallback (logged with the rejection);
+    with none left it is cut back as any failure."""
+    import cgfem.solve.static as static
+    from dataclasses import replace
+    from cgfem.case.model import SolverOptions
+    from cgfem.solve.outer import Increment, IncrementFailure
+    from cgfem.solve.policy import SolverPolicy
+
+    calls = []
+
+    def increment(system, solves, u, stress, t, options, log, guess=None, loose=True):
+        calls.append((t, system.policy.floating_search))
+        if system.policy.floating_search == "energy" or t <= 0.5:
+            return Increment(u, stress, stress, [[1.0, 0.0]], [0.0], True)
+        return IncrementFailure("rejected", 2, 0.0, 4, rejected="link turned 0.3 rad")
+
+    class Floating(_OneDof):
+        def held_by_contact_alone(self):
+            return True
+
+    monkeypatch.setattr(static, "solve_increment", increment)
+    lines: list[str] = []
+    policy = replace(SolverPolicy(), fallbacks="floating_search=energy")
+    result = static.solve_static(Floating(policy), 1, SolverOptions(max_cutbacks=5), log=lines.append)
+    assert result.status == "converged"
+    assert calls == [(1.0, "residual"), (1.0, "energy")]
+    assert [(s.load_factor, s.fallback) for s in result.steps] == [(1.0, 1)]
+    assert any("was rejected: link turned 0.3 rad; fallback 1: the step again from load factor 0" in line
+               and "cut-backs" not in line for line in lines)
+    calls.clear()
+    result = static.solve_static(Floating(replace(policy, fallbacks="none")), 1, SolverOptions(max_cutbacks=5))
+    assert result.status == "failed"
+    assert calls[:2] == [(1.0, "residual"), (0.5, "residual")]
+
+
 def test_a_failure_after_loose_passes_is_tried_again_with_tight_passes(monkeypatch):
     """With loose passes in play (here ``pass_tolerance`` 0.5 on the direct path) an increment
     that fails after its first pass is tried once more with every pass to ``newton_tol``

@@ -95,7 +95,8 @@ class SolverPolicy:
         motions), the energy line search alone, and the search with the shift at ``1e-5``. A run
         that converges without a fallback is untouched (``docs/methods/contact.md``,
         "Fallbacks").
-    rotation_stretch : in small strain a converged state is rejected (the increment cut back)
+    rotation_stretch : in small strain a converged state is rejected (the step tried with the
+        next fallback, or the increment cut back where none is left)
         where a floating body's linearized rotation stretches a chord between its contacts by
         more than this fraction of the chord's elastic stretch (the rotation is strain-free
         but not length-preserving), more than the gaps at the chord's ends and more than

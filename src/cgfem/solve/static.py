@@ -13,7 +13,8 @@ rule (:data:`~cgfem.solve.outer.UNSETTLED`), the increment is halved (at most
 ``max_cutbacks`` times per step, :class:`StepControl`) and the step is reached in several
 sub-steps; if it still fails, the step is solved again from where it started with each of
 the policy's fallbacks in turn (:func:`~cgfem.solve.policy.fallback_policies`; the failed
-attempts' sub-steps are dropped, and the run keeps the fallback that converged), and when
+attempts' sub-steps are dropped, and the run keeps the fallback that converged; a state
+rejected because a floating body turned goes to the next fallback without cut-backs), and when
 none is left the run stops with status ``failed`` and keeps every converged step. An increment that fails after its first pass
 while loose passes are in play (:func:`~cgfem.solve.outer.pass_tolerance`: the Krylov
 path's) is first solved once more from the same state with every pass to ``newton_tol``. The system, its items and
@@ -150,7 +151,9 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
     A step whose increment fails is reached in sub-steps of half the size (a quarter after
     a second failure, ...), at most ``options.max_cutbacks`` halvings per step. If it still
     fails it is solved again from where it started with each of the policy's fallbacks in
-    turn (:func:`~cgfem.solve.policy.fallback_policies`): the sub-steps of the failed attempts
+    turn (:func:`~cgfem.solve.policy.fallback_policies`); an increment whose state is rejected
+    because a floating body turned (:meth:`~cgfem.solve.system.System.turned_floating`) goes
+    to the next fallback at once, without cut-backs, while one is left. The sub-steps of the failed attempts
     are dropped from the result, and ``on_drop`` is called with the number of records kept
     (every record then lies on the path to the last state; each names the fallback it
     converged with, :attr:`StepRecord.fallback`). A (sub)step
@@ -180,7 +183,10 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
             log(f"t={t_new:.4g}: {outcome}; again with every outer pass solved to newton_tol")
             outcome = solve_increment(system, solves, u, recovered, t_new, options, log, guess, loose=False)
         if isinstance(outcome, IncrementFailure):
-            if control.cut_back():
+            # a state rejected because a floating body turned asks for the floating constants
+            # the fallbacks change, not for a smaller increment: the next fallback at once
+            turned = bool(outcome.rejected) and bool(untried)
+            if not turned and control.cut_back():
                 log(f"cut-back {control.cutbacks}: load increment {control.size:.4g}")
                 continue
             if not untried:
@@ -192,7 +198,8 @@ def solve_static(system: System, steps: int, options: SolverOptions, log: Log | 
             kept, t, u, recovered, last, saved = anchor
             system.restore(saved)
             dropped = len(records) - kept
-            log(f"t={t_new:.4g}: no convergence after {options.max_cutbacks} cut-backs ({outcome}); "
+            why = "" if turned else f"no convergence after {options.max_cutbacks} cut-backs; "
+            log(f"t={t_new:.4g}: {why}{outcome}; "
                 f"fallback {fallback}: the step again from load factor {t:.4g}"
                 + (f" ({dropped} converged sub-step(s) dropped)" if dropped else "") + " with "
                 + ", ".join(f"{k}={v}" for k, v in changed(policy, own).items() if k != "fallbacks"))
