@@ -9,6 +9,7 @@ and finite-strain (current area, non-symmetric) weights.
 
 from __future__ import annotations
 
+import copy
 import functools
 
 import numpy as np
@@ -58,6 +59,30 @@ def _pair(definition: str, finite: bool, order: int = 1) -> ContactPair:
 @pytest.fixture(scope="module", params=["nurbs_fe", "facets"])
 def definition(request):
     return request.param
+
+
+def test_the_tangent_in_chunks_is_the_tangent_at_once(definition, monkeypatch):
+    """The active points' blocks are summed a chunk of points at a time (memory): the chunks'
+    triplets, summed, are the one chunk's matrix, and the residual is the same."""
+    import cgfem.contact.pair as pair_module
+
+    pair = _pair(definition, False, 1)
+    rng = np.random.default_rng(1)
+    n_s, n_m = pair.slave_space.n_dofs, pair.master_space.n_dofs
+    n = n_s + n_m
+    u = 0.02 * rng.standard_normal(n)
+    pair.state.p_N = 50.0 * rng.standard_normal(pair.n_points) - 20.0
+    start = copy.deepcopy(pair.state)
+    results = []
+    for chunk in (10 ** 9, 1):               # one chunk; chunks of 64 points
+        monkeypatch.setattr(pair_module, "CHUNK_POINTS", chunk)
+        pair.state = copy.deepcopy(start)
+        r_s, r_m, (rows, cols, vals) = pair.assemble(u[:n_s], u[n_s:], True)
+        results.append((np.concatenate([r_s, r_m]), sp.coo_matrix((vals, (rows, cols)), shape=(n, n)).tocsr()))
+    (r1, K1), (r2, K2) = results
+    assert np.count_nonzero(pair.state.active) > 3 * 64      # several chunks
+    np.testing.assert_array_equal(r1, r2)
+    assert abs(K1 - K2).max() <= 1e-13 * abs(K1).max()
 
 
 @pytest.mark.parametrize("order", [1, pytest.param(2, marks=pytest.mark.slow)])

@@ -330,24 +330,25 @@ class ContactPair:
             rows = rows[np.lexsort((hits.piece[rows], slot, self.frames.slot[rows]))]
         n = u_s.size + u_m.size
         # points in chunks: each carries (D, D) blocks and their temporaries (a few kB at D = 48);
-        # the triplets of several chunks are summed chunk by chunk (memory)
+        # the triplets of several chunks are summed within each chunk (memory), and the
+        # chunks' sums returned one after the other (the system sums them with the rest)
         d = 3 * (self.frames.phi.shape[1] + self.surface.width)
         per_chunk = max(64, CHUNK_POINTS * 48 ** 2 // d ** 2)
         chunks = [c for c in np.array_split(rows, max(1, -(-rows.size // per_chunk))) if c.size]
-        K = None
+        parts = []
         for chunk in chunks:
             trip = self._add_points(chunk, st, hits, lam, u_s, u_m, tangent, r_s, r_m)
             if trip is not None and len(chunks) > 1:
-                Kc = sp.coo_matrix((trip[2], (trip[0], trip[1])), shape=(n, n)).tocsr()
-                K = Kc if K is None else K + Kc
+                parts.append(sp.coo_matrix((trip[2], (trip[0], trip[1])), shape=(n, n)).tocsr().tocoo())
             elif trip is not None:
                 return r_s, r_m, trip
         if not tangent:
             return r_s, r_m, None
-        if K is None:
+        if not parts:
             return r_s, r_m, (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
-        K = K.tocoo()
-        return r_s, r_m, (K.row.astype(np.int64), K.col.astype(np.int64), K.data)
+        return r_s, r_m, (np.concatenate([p.row for p in parts]).astype(np.int64),
+                          np.concatenate([p.col for p in parts]).astype(np.int64),
+                          np.concatenate([p.data for p in parts]))
 
     def _add_points(self, rows, st, hits, lam, u_s, u_m, tangent, r_s, r_m) -> tuple | None:
         """Residual of the slave points ``rows`` added to ``r_s``, ``r_m``; their tangent (COO
