@@ -1,6 +1,7 @@
 """Result files of a run: ``summary.json``, ``step_NNN.vtu``, ``surface_NNN.vtu`` and
 ``boundary_NNN.vtu`` (README "Result files" lists every field; the keys other tools rely on
-are fixed, new ones may be added).
+are fixed, new ones may be added), and per series of step files a ParaView collection
+``{prefix}.pvd`` whose times are the steps' load factors (:func:`write_collections`).
 
 Every file is written to a hidden temporary name next to its target, flushed, then renamed
 onto it, so a reader never sees a partial file. ``summary.json`` is written last: a folder
@@ -11,6 +12,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from xml.sax.saxutils import quoteattr
 
 import meshio
 import numpy as np
@@ -60,9 +62,33 @@ def _unlink(folder: Path, patterns) -> None:
 
 
 def clear_previous(folder: Path) -> None:
-    """Remove the files an earlier run left in ``folder`` (:data:`RUN_FILES` and every step's
-    files), and no other."""
-    _unlink(folder, [*RUN_FILES, *(f"{prefix}_[0-9]*.*" for prefix in STEP_PREFIXES)])
+    """Remove the files an earlier run left in ``folder`` (:data:`RUN_FILES`, every step's
+    files and their collections), and no other."""
+    _unlink(folder, [*RUN_FILES, *(f"{prefix}_[0-9]*.*" for prefix in STEP_PREFIXES),
+                     *(f"{prefix}.pvd" for prefix in STEP_PREFIXES)])
+
+
+def write_collections(folder: Path, load_factors: list[float]) -> list[Path]:
+    """Write ``{prefix}.pvd`` into ``folder`` for every prefix of :data:`STEP_PREFIXES` with
+    step files there: a ParaView collection of the files ``{prefix}_NNN.vtu`` of steps
+    ``NNN = 1 .. len(load_factors)`` that exist, each at the time of its step's load factor
+    (``load_factors[NNN - 1]``), so that ParaView steps through the load. A prefix without
+    such files has no collection (one left from before is removed). Each file is written
+    atomically; returns those written."""
+    folder = Path(folder)
+    written = []
+    for prefix in STEP_PREFIXES:
+        entries = [(float(t), f"{prefix}_{k:03d}.vtu") for k, t in enumerate(load_factors, start=1)
+                   if (folder / f"{prefix}_{k:03d}.vtu").exists()]
+        target = folder / f"{prefix}.pvd"
+        if not entries:
+            target.unlink(missing_ok=True)
+            continue
+        rows = "".join(f'    <DataSet timestep="{t!r}" part="0" file={quoteattr(name)}/>\n' for t, name in entries)
+        written.append(write_text_atomic(target, '<?xml version="1.0"?>\n'
+                                         '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">\n'
+                                         f"  <Collection>\n{rows}  </Collection>\n</VTKFile>\n"))
+    return written
 
 
 def remove_steps(folder: Path, numbers) -> None:

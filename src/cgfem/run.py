@@ -41,7 +41,7 @@ from cgfem.fem import spr
 from cgfem.fem.spr import energy_norm, zz_estimate
 from cgfem.geometry.builders import build_solid
 from cgfem.geometry.measure import boundary_measures
-from cgfem.results import clear_previous, remove_steps, write_json_atomic, write_step
+from cgfem.results import clear_previous, remove_steps, write_collections, write_json_atomic, write_step
 from cgfem.solve.linear import available_backends, mkl_threads
 from cgfem.solve.static import StepRecord, solve_static
 from cgfem.solve.policy import DEFAULT_POLICY, SolverPolicy, changed, fallback_policies
@@ -322,6 +322,7 @@ def run_case(case: Case, level: int, surface: str, out: Path,
 
         def on_step(record: StepRecord) -> None:
             steps.append(_write_step(out, system, record, len(steps) + 1, views))
+            write_collections(out, [s["load_factor"] for s in steps])
             outer = "" if record.outer_converged else ", outer loop NOT converged"
             log(f"step {len(steps)} converged at load factor {record.load_factor:.4g} "
                 f"({record.outer_passes} outer passes{outer}, {record.seconds:.2f} s)")
@@ -331,6 +332,7 @@ def run_case(case: Case, level: int, surface: str, out: Path,
             # ``kept`` are no longer on the run's path; their files go with them
             remove_steps(out, range(kept + 1, len(steps) + 1))
             del steps[kept:]
+            write_collections(out, [s["load_factor"] for s in steps])
 
         result = solve_static(system, case.steps, case.solver, log, on_step, on_drop)
     except InputError:

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import re
 import signal
 import subprocess
 import sys
@@ -103,9 +104,14 @@ def test_run_writes_summary_and_steps(tmp_path, capsys):
     assert np.linalg.norm(ra + rb) < 1e-9 * np.linalg.norm(ra)
     assert rb[1] < 0 < ra[1]
     assert last["max_von_mises"]["link"] > 0 and last["newton_residuals"][-1] < last["newton_residuals"][0]
-    assert sorted(p.name for p in out.iterdir()) == ["boundary_001.vtu", "boundary_002.vtu",
-                                                     "step_001.vtu", "step_002.vtu", "step_notes.txt",
-                                                     "summary.json", "surface_001.vtu", "surface_002.vtu"]
+    assert sorted(p.name for p in out.iterdir()) == ["boundary.pvd", "boundary_001.vtu", "boundary_002.vtu",
+                                                     "step.pvd", "step_001.vtu", "step_002.vtu", "step_notes.txt",
+                                                     "summary.json", "surface.pvd", "surface_001.vtu",
+                                                     "surface_002.vtu"]
+    # ParaView's collections step through the load factors, one file per step
+    collection = (out / "step.pvd").read_text()
+    assert re.findall(r'timestep="([^"]+)" part="0" file="([^"]+)"', collection) == [
+        ("0.5", "step_001.vtu"), ("1.0", "step_002.vtu")]
     mesh = meshio.read(out / "step_002.vtu")
     assert mesh.points.shape[0] == body["nodes"]
     assert {"displacement", "stress", "von_mises_nodal"} <= set(mesh.point_data)
@@ -138,8 +144,10 @@ def test_sub_steps_a_fallback_drops_leave_no_files(tmp_path, monkeypatch):
                  "--quiet"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert [s["load_factor"] for s in summary["steps"]] == [0.5]
-    assert sorted(p.name for p in out.iterdir()) == ["boundary_001.vtu", "step_001.vtu", "summary.json",
+    assert sorted(p.name for p in out.iterdir()) == ["boundary.pvd", "boundary_001.vtu", "step.pvd",
+                                                     "step_001.vtu", "summary.json", "surface.pvd",
                                                      "surface_001.vtu"]
+    assert "step_002.vtu" not in (out / "step.pvd").read_text()
 
 
 def test_run_that_fails_keeps_converged_steps_and_exits_1(tmp_path, capsys):
