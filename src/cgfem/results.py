@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from xml.sax.saxutils import quoteattr
 
 import meshio
 import numpy as np
@@ -69,22 +68,21 @@ def clear_previous(folder: Path) -> None:
 
 
 def write_collections(folder: Path, load_factors: list[float]) -> list[Path]:
-    """Write ``{prefix}.pvd`` into ``folder`` for every prefix of :data:`STEP_PREFIXES` with
-    step files there: a ParaView collection of the files ``{prefix}_NNN.vtu`` of steps
-    ``NNN = 1 .. len(load_factors)`` that exist, each at the time of its step's load factor
-    (``load_factors[NNN - 1]``), so that ParaView steps through the load. A prefix without
-    such files has no collection (one left from before is removed). Each file is written
+    """Write ``{prefix}.pvd`` into ``folder`` for every prefix of :data:`STEP_PREFIXES` the run
+    writes (those with a file of step 1 there; every step writes the same ones): a ParaView
+    collection of ``{prefix}_NNN.vtu``, ``NNN = 1 .. len(load_factors)``, each at the time of
+    its step's load factor (``load_factors[NNN - 1]``), so that ParaView steps through the
+    load. Without steps, a collection left from before is removed. Each file is written
     atomically; returns those written."""
     folder = Path(folder)
     written = []
     for prefix in STEP_PREFIXES:
-        entries = [(float(t), f"{prefix}_{k:03d}.vtu") for k, t in enumerate(load_factors, start=1)
-                   if (folder / f"{prefix}_{k:03d}.vtu").exists()]
         target = folder / f"{prefix}.pvd"
-        if not entries:
+        if not load_factors or not (folder / f"{prefix}_001.vtu").exists():
             target.unlink(missing_ok=True)
             continue
-        rows = "".join(f'    <DataSet timestep="{t!r}" part="0" file={quoteattr(name)}/>\n' for t, name in entries)
+        rows = "".join(f'    <DataSet timestep="{float(t)!r}" part="0" file="{prefix}_{k:03d}.vtu"/>\n'
+                       for k, t in enumerate(load_factors, start=1))
         written.append(write_text_atomic(target, '<?xml version="1.0"?>\n'
                                          '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">\n'
                                          f"  <Collection>\n{rows}  </Collection>\n</VTKFile>\n"))

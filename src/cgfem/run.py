@@ -320,9 +320,12 @@ def run_case(case: Case, level: int, surface: str, out: Path,
                         {b.name: (b.hold_spin, b.material.E) for b in case.bodies if b.hold_spin is not None})
         views = [BoundaryView.of(m, solids[m.name]) for m in models]
 
+        def collect() -> None:
+            write_collections(out, [s["load_factor"] for s in steps])
+
         def on_step(record: StepRecord) -> None:
             steps.append(_write_step(out, system, record, len(steps) + 1, views))
-            write_collections(out, [s["load_factor"] for s in steps])
+            collect()
             outer = "" if record.outer_converged else ", outer loop NOT converged"
             log(f"step {len(steps)} converged at load factor {record.load_factor:.4g} "
                 f"({record.outer_passes} outer passes{outer}, {record.seconds:.2f} s)")
@@ -332,7 +335,7 @@ def run_case(case: Case, level: int, surface: str, out: Path,
             # ``kept`` are no longer on the run's path; their files go with them
             remove_steps(out, range(kept + 1, len(steps) + 1))
             del steps[kept:]
-            write_collections(out, [s["load_factor"] for s in steps])
+            collect()
 
         result = solve_static(system, case.steps, case.solver, log, on_step, on_drop)
     except InputError:
